@@ -1,0 +1,29 @@
+"""motion_envs: Gymnasium environments in which a learned human-motion prior is the simulator.
+
+Importing the package registers every environment id with Gymnasium (see
+`register_envs`).
+"""
+
+from __future__ import annotations
+
+import gymnasium as gym
+
+__version__ = "0.1.0"
+
+ENV_SPECS: dict[str, str] = {}
+"""Environment id -> entry point. Each environment's issue adds its line here."""
+
+
+def register_envs() -> list[str]:
+    """Register every motion_envs id with Gymnasium; calling it again changes nothing.
+
+    Returns:
+        The ids registered by motion_envs.
+    """
+    for env_id, entry_point in ENV_SPECS.items():
+        if env_id not in gym.registry:
+            gym.register(id=env_id, entry_point=entry_point)
+    return sorted(ENV_SPECS)
+
+
+register_envs()

@@ -1,0 +1,22 @@
+"""Where the motion-capture folder and the data cache live."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+MOCAP_ENV_VAR = "MOTION_ENVS_DATA"
+CACHE_ENV_VAR = "MOTION_ENVS_CACHE"
+
+
+def default_mocap_dir() -> Path | None:
+    """`$MOTION_ENVS_DATA`, else `shared/mocap` beside the repository checkout, else None."""
+    if os.environ.get(MOCAP_ENV_VAR):
+        return Path(os.environ[MOCAP_ENV_VAR]).expanduser()
+    beside_repo = Path(__file__).resolve().parents[3] / "shared" / "mocap"
+    return beside_repo if beside_repo.is_dir() else None
+
+
+def default_cache_dir() -> Path:
+    """`$MOTION_ENVS_CACHE`, else `~/.cache/motion_envs`."""
+    return Path(os.environ.get(CACHE_ENV_VAR, Path.home() / ".cache" / "motion_envs")).expanduser()

@@ -1,0 +1,40 @@
+"""Package surface: env registration and the command line."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import gymnasium as gym
+
+import motion_envs
+
+
+def test_register_envs_is_idempotent_and_registers_every_listed_id():
+    before = {k for k in gym.registry if k.startswith("motion_envs/")}
+    first = motion_envs.register_envs()
+    second = motion_envs.register_envs()
+    after = {k for k in gym.registry if k.startswith("motion_envs/")}
+    assert first == second == sorted(motion_envs.ENV_SPECS)
+    assert after == before == set(motion_envs.ENV_SPECS)
+
+
+def test_no_env_is_registered_before_the_first_env_lands():
+    assert motion_envs.ENV_SPECS == {}
+    assert not [k for k in gym.registry if k.startswith("motion_envs/")]
+
+
+def test_cli_help_lists_the_subcommands():
+    result = subprocess.run(
+        [sys.executable, "-m", "motion_envs.cli", "--help"], capture_output=True, text=True, check=True
+    )
+    for command in ("data", "train", "bench", "play"):
+        assert command in result.stdout
+
+
+def test_cli_reports_unfinished_subcommands_clearly():
+    result = subprocess.run(
+        [sys.executable, "-m", "motion_envs.cli", "train", "gamma"], capture_output=True, text=True
+    )
+    assert result.returncode == 2
+    assert "not available yet" in result.stderr

@@ -11,10 +11,11 @@ from __future__ import annotations
 
 import numpy as np
 
-MANNEQUIN_TO_WORLD = np.array(
-    [[-1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 1.0, 0.0]], dtype=np.float64
-)
-"""(3, 3) rotation, det +1: world = MANNEQUIN_TO_WORLD @ mannequin."""
+Y_UP_TO_Z_UP = np.array([[-1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 1.0, 0.0]], dtype=np.float64)
+"""(3, 3) rotation, det +1: takes a Y-up frame whose figures face +Z to Z up facing +Y."""
+
+MANNEQUIN_TO_WORLD = Y_UP_TO_Z_UP
+"""world = MANNEQUIN_TO_WORLD @ mannequin (also used for Y-up mocap, which shares the axes)."""
 
 WORLD_UP = np.array([0.0, 0.0, 1.0])
 WORLD_FORWARD = np.array([0.0, 1.0, 0.0])

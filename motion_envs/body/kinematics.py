@@ -66,13 +66,15 @@ class BodyModel(nn.Module):
             "axes_to_world", torch.as_tensor(MANNEQUIN_TO_WORLD, dtype=torch.float32)
         )
         levels = _levels(PARENTS)
-        self._level_joints = levels[1:]
-        # parents of level d sit in level d-1: index them within that level
+        order = [j for level in levels for j in level]  # joints grouped by depth
+        self._level_bounds = [(order.index(level[0]), order.index(level[0]) + len(level)) for level in levels]
+        # parents of depth-d joints all have depth d-1: index them within that level
         self._level_parent_slots = [
-            [levels[d - 1].index(PARENTS[j]) for j in levels[d]] for d in range(1, len(levels))
+            torch.tensor([levels[d - 1].index(PARENTS[j]) for j in levels[d]]) for d in range(1, len(levels))
         ]
-        order = [j for level in levels for j in level]
-        self._joint_slot = [order.index(j) for j in range(NUM_JOINTS)]
+        self.register_buffer("level_offsets", self.offsets[order], persistent=False)
+        self._pose_order = torch.tensor([j - 1 for j in order[1:]])  # body_pose rows in depth order
+        self._joint_slot = torch.tensor([order.index(j) for j in range(NUM_JOINTS)])
 
     @property
     def num_vertices(self) -> int:
@@ -106,17 +108,18 @@ class BodyModel(nn.Module):
                 f"body_pose must be {(*batch, NUM_BODY_POSE_JOINTS, 3)} or "
                 f"{(*batch, NUM_BODY_POSE_JOINTS, 6)}, got {tuple(body_pose.shape)}"
             )
-        root = rotation_matrix(global_orient).reshape(-1, 3, 3)
-        local = self._local_rotations_in_world_axes(body_pose.reshape(-1, NUM_BODY_POSE_JOINTS, body_pose.shape[-1]))
-        rotations = [root[:, None]]
+        root = rotation_matrix(global_orient).reshape(-1, 1, 3, 3)
+        pose = body_pose.reshape(-1, NUM_BODY_POSE_JOINTS, body_pose.shape[-1])
+        local = self._local_rotations_in_world_axes(pose.index_select(1, self._pose_order))
+        rotations = [root]
         positions = [transl.reshape(-1, 1, 3)]
-        for joints, slots in zip(self._level_joints, self._level_parent_slots):
-            parent_rot = rotations[-1][:, slots]
-            parent_pos = positions[-1][:, slots]
-            rotations.append(parent_rot @ local[:, [j - 1 for j in joints]])
-            positions.append(parent_pos + (parent_rot @ self.offsets[joints, :, None]).squeeze(-1))
-        joint_rot = torch.cat(rotations, dim=1)[:, self._joint_slot]
-        joint_pos = torch.cat(positions, dim=1)[:, self._joint_slot]
+        for (start, stop), slots in zip(self._level_bounds[1:], self._level_parent_slots):
+            parent_rot = rotations[-1].index_select(1, slots)
+            rotations.append(torch.einsum("bkij,bkjl->bkil", parent_rot, local[:, start - 1 : stop - 1]))
+            offsets = self.level_offsets[start:stop]
+            positions.append(positions[-1].index_select(1, slots) + torch.einsum("bkij,kj->bki", parent_rot, offsets))
+        joint_rot = torch.cat(rotations, dim=1).index_select(1, self._joint_slot)
+        joint_pos = torch.cat(positions, dim=1).index_select(1, self._joint_slot)
         return BodyPose(
             joints=joint_pos.reshape(*batch, NUM_JOINTS, 3),
             rotations=joint_rot.reshape(*batch, NUM_JOINTS, 3, 3),
@@ -132,6 +135,10 @@ class BodyModel(nn.Module):
     def skin(self, pose: BodyPose, vertex_ids: torch.Tensor) -> torch.Tensor:
         """Linear-blend skinning of a vertex subset.
 
+        Each vertex is sum_k w_k (R_k o_k + t_k); stacking every joint's
+        [R | t] as a (3, 22 * 4) matrix turns the whole subset into one matmul
+        with a (22 * 4, V) coefficient matrix of weights times [o_k; 1].
+
         Args:
             pose: output of `forward` with batch shape (...).
             vertex_ids: (V,) long vertex ids of the wooden mesh.
@@ -139,9 +146,17 @@ class BodyModel(nn.Module):
         Returns:
             (..., V, 3) world vertex positions.
         """
+        dtype = pose.joints.dtype
+        coefficients = self.skin_coefficients(vertex_ids).to(dtype)  # (22 * 4, V)
+        transforms = torch.cat([pose.rotations, pose.joints[..., None]], dim=-1)  # (..., 22, 3, 4)
+        stacked = transforms.transpose(-3, -2).reshape(*transforms.shape[:-3], 3, NUM_JOINTS * 4)
+        return (stacked @ coefficients).transpose(-1, -2)
+
+    def skin_coefficients(self, vertex_ids: torch.Tensor) -> torch.Tensor:
+        """(22 * 4, V) matrix: entry (4 j + b, v) = sum over v's influences on joint j of w * [o; 1][b]."""
         joints = self.skin_joints[vertex_ids]  # (V, K)
-        rot = pose.rotations[..., joints, :, :]  # (..., V, K, 3, 3)
-        pos = pose.joints[..., joints, :]  # (..., V, K, 3)
-        local = self.skin_offsets[vertex_ids].to(rot.dtype)  # (V, K, 3)
-        posed = (rot @ local[..., None]).squeeze(-1) + pos
-        return (posed * self.skin_weights[vertex_ids, :, None].to(rot.dtype)).sum(dim=-2)
+        homogeneous = torch.cat([self.skin_offsets[vertex_ids], torch.ones_like(self.skin_weights[vertex_ids, :, None])], -1)
+        weighted = homogeneous * self.skin_weights[vertex_ids, :, None]  # (V, K, 4)
+        coefficients = torch.zeros(len(vertex_ids), NUM_JOINTS, 4, dtype=weighted.dtype, device=weighted.device)
+        coefficients.index_put_((torch.arange(len(vertex_ids), device=joints.device)[:, None], joints), weighted, accumulate=True)
+        return coefficients.reshape(len(vertex_ids), NUM_JOINTS * 4).T

@@ -10,11 +10,15 @@ CACHE_ENV_VAR = "MOTION_ENVS_CACHE"
 
 
 def default_mocap_dir() -> Path | None:
-    """`$MOTION_ENVS_DATA`, else `shared/mocap` beside the repository checkout, else None."""
+    """`$MOTION_ENVS_DATA`, else `shared/mocap` beside the checkout (or beside the working
+    directory), else None."""
     if os.environ.get(MOCAP_ENV_VAR):
         return Path(os.environ[MOCAP_ENV_VAR]).expanduser()
-    beside_repo = Path(__file__).resolve().parents[3] / "shared" / "mocap"
-    return beside_repo if beside_repo.is_dir() else None
+    for root in (Path(__file__).resolve().parents[2], Path.cwd()):
+        beside = root.parent / "shared" / "mocap"
+        if beside.is_dir():
+            return beside
+    return None
 
 
 def default_cache_dir() -> Path:

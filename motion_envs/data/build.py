@@ -1,0 +1,193 @@
+"""`motion-envs data build`: mocap folder -> retargeted, canonical body motion cache.
+
+One `.npz` per frame rate, named by a content hash of the source files, the
+data code and the settings, so an unchanged rebuild only re-hashes and
+returns. Clips that fail to parse or retarget are reported and listed in the
+cache (`failures`), never silently dropped.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import sys
+import tempfile
+from dataclasses import dataclass, field
+from importlib.metadata import version
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from motion_envs.body import BodyModel
+from motion_envs.data.amass import read_amass_npz
+from motion_envs.data.asf_amc import read_amc, read_asf
+from motion_envs.data.bvh import read_bvh
+from motion_envs.data.canonical import canonicalise
+from motion_envs.data.motion import BodyMotion, MocapFormatError
+from motion_envs.data.paths import default_cache_dir, default_mocap_dir
+from motion_envs.data.resample import resample_body, resample_source
+from motion_envs.data.retarget import RetargetConfig, retarget
+from motion_envs.data.skeleton_maps import UnknownSkeletonError, match_skeleton
+from motion_envs.data.splits import split_of
+
+DEFAULT_FPS = (30, 40)
+"""WANDR runs at 30 fps, GAMMA at 40 fps."""
+CACHE_FORMAT = 1
+
+
+@dataclass(frozen=True)
+class ClipSource:
+    """One motion file found in the mocap folder (`skeleton` is the ASF for an AMC)."""
+
+    path: Path
+    relative: str
+    subject: str
+    skeleton: Path | None = None
+
+
+@dataclass
+class BuildReport:
+    """What a build did: cache paths per fps, clips written, failures (file: reason)."""
+
+    caches: dict[int, Path] = field(default_factory=dict)
+    clips: int = 0
+    failures: list[str] = field(default_factory=list)
+    rebuilt: bool = False
+
+
+def find_sources(mocap_dir: Path, subsets: tuple[str, ...] | None = None) -> list[ClipSource]:
+    """Every .bvh, .amc (with its .asf) and .npz under `mocap_dir` (or its `subsets` folders)."""
+    mocap_dir = Path(mocap_dir)
+    if not mocap_dir.is_dir():
+        raise FileNotFoundError(f"mocap folder {mocap_dir} does not exist")
+    roots = [mocap_dir / s for s in subsets] if subsets else [mocap_dir]
+    for root in roots:
+        if not root.is_dir():
+            present = sorted(p.name for p in mocap_dir.iterdir() if p.is_dir())
+            raise FileNotFoundError(f"subset folder {root} does not exist; subfolders: {present}")
+    found: list[ClipSource] = []
+    for root in roots:
+        for path in sorted(root.rglob("*")):
+            suffix = path.suffix.lower()
+            relative = path.relative_to(mocap_dir).as_posix()
+            if suffix == ".bvh":
+                found.append(ClipSource(path, relative, path.stem.split("_")[0]))
+            elif suffix == ".npz":
+                found.append(ClipSource(path, relative, path.parent.name))
+            elif suffix == ".amc":
+                asf = _asf_for(path)
+                found.append(ClipSource(path, relative, asf.stem if asf else path.stem, asf))
+    return found
+
+
+def _asf_for(amc: Path) -> Path | None:
+    """The .asf beside `amc` whose name is the longest prefix of the AMC's name."""
+    candidates = [p for p in amc.parent.glob("*") if p.suffix.lower() == ".asf" and amc.stem.startswith(p.stem)]
+    return max(candidates, key=lambda p: len(p.stem)) if candidates else None
+
+
+def content_hash(sources: list[ClipSource], fps: int, retarget_config: RetargetConfig) -> str:
+    """sha256 over the source bytes, the data code, the body definition, mannequin-x's version
+    and the settings (the FK implementation is left out: it changes speed, not results)."""
+    digest = hashlib.sha256(f"{CACHE_FORMAT}|{fps}|{retarget_config}|{version('mannequin-x')}".encode())
+    package = Path(__file__).resolve().parents[1]
+    body_definition = [package / "body" / name for name in ("frames.py", "skeleton.py", "markers.py")]
+    for code in sorted([*package.joinpath("data").glob("*.py"), *body_definition]):
+        digest.update(code.read_bytes())
+    for source in sources:
+        digest.update(source.relative.encode())
+        for path in (source.path, source.skeleton):
+            if path is not None:
+                digest.update(hashlib.sha256(path.read_bytes()).digest())
+    return digest.hexdigest()
+
+
+def load_clip(source: ClipSource, fps: int, body: BodyModel, retarget_config: RetargetConfig) -> BodyMotion:
+    """Read, resample, retarget (for skeletal mocap) and canonicalise one clip."""
+    name = Path(source.relative).with_suffix("").as_posix()
+    if source.path.suffix.lower() == ".npz":
+        motion = resample_body(read_amass_npz(source.path, subject=source.subject), fps)
+        motion.info["retarget_error"] = np.zeros((motion.num_frames, 22))
+        return canonicalise(motion, body)
+    if source.path.suffix.lower() == ".amc":
+        if source.skeleton is None:
+            raise MocapFormatError(source.path, None, "no .asf skeleton beside it whose name prefixes it")
+        captured = read_amc(source.path, read_asf(source.skeleton))
+    else:
+        captured = read_bvh(source.path)
+    mapping = match_skeleton(captured.skeleton.names, str(source.path))
+    captured = captured.frames(mapping.leading_frames_to_skip)
+    result = retarget(resample_source(captured, fps), mapping, body, name, source.subject, retarget_config)
+    result.motion.info["retarget_error"] = result.joint_error
+    return canonicalise(result.motion, body)
+
+
+def build(
+    mocap_dir: Path | None = None,
+    cache_dir: Path | None = None,
+    subsets: tuple[str, ...] | None = None,
+    fps_list: tuple[int, ...] = DEFAULT_FPS,
+    retarget_config: RetargetConfig = RetargetConfig(),
+    progress: bool = True,
+) -> BuildReport:
+    """Build (or find) the cache for each frame rate."""
+    mocap_dir = mocap_dir or default_mocap_dir()
+    if mocap_dir is None:
+        raise FileNotFoundError("no mocap folder: pass --mocap-dir or set MOTION_ENVS_DATA")
+    cache_dir = Path(cache_dir or default_cache_dir())
+    cache_dir.mkdir(parents=True, exist_ok=True)
+    sources = find_sources(Path(mocap_dir), subsets)
+    if not sources:
+        raise FileNotFoundError(f"no .bvh, .amc or .npz files under {mocap_dir}")
+    report = BuildReport()
+    body = BodyModel()
+    for fps in fps_list:
+        path = cache_dir / f"motion_{fps}fps_{content_hash(sources, fps, retarget_config)[:16]}.npz"
+        report.caches[fps] = path
+        if path.exists():
+            continue
+        report.rebuilt = True
+        clips: list[tuple[ClipSource, BodyMotion]] = []
+        failures: list[str] = []
+        for source in tqdm(sources, desc=f"retarget @ {fps} fps", disable=not progress, unit="clip"):
+            try:
+                clips.append((source, load_clip(source, fps, body, retarget_config)))
+            except (MocapFormatError, UnknownSkeletonError, ValueError) as error:
+                failures.append(f"{source.relative}: {error}")
+                print(f"skipped {source.relative}: {error}", file=sys.stderr)
+        if not clips:
+            raise RuntimeError(f"every clip failed; first: {failures[0] if failures else 'none'}")
+        _write_cache(path, clips, failures, fps, mocap_dir)
+        report.failures = failures
+    report.clips = len(sources) - len(report.failures)
+    return report
+
+
+def _write_cache(path: Path, clips: list[tuple[ClipSource, BodyMotion]], failures: list[str], fps: int,
+                 mocap_dir: Path) -> None:  # fmt: skip
+    motions = [motion for _, motion in clips]
+    errors = [motion.info["retarget_error"] for motion in motions]
+    arrays = {
+        "format": np.array(CACHE_FORMAT),
+        "fps": np.array(fps),
+        "transl": np.concatenate([m.transl for m in motions]).astype(np.float32),
+        "global_orient": np.concatenate([m.global_orient for m in motions]).astype(np.float32),
+        "body_pose": np.concatenate([m.body_pose for m in motions]).astype(np.float32),
+        "clip_start": np.cumsum([0] + [m.num_frames for m in motions]),
+        "clip_name": np.array([m.name for m in motions]),
+        "clip_subject": np.array([m.subject for m in motions]),
+        "clip_split": np.array([split_of(m.subject) for m in motions]),
+        "clip_file": np.array([source.relative for source, _ in clips]),
+        "clip_skeleton": np.array([m.info["skeleton"] for m in motions]),
+        "retarget_error_mean": np.array([np.nanmean(e) for e in errors]),
+        "retarget_error_p95": np.array([np.nanpercentile(e, 95) for e in errors]),
+        "retarget_error_max": np.array([np.nanmax(e) for e in errors]),
+        "failures": np.array(failures, dtype=str),
+        "mocap_dir": np.array(str(mocap_dir)),
+    }
+    handle, temporary = tempfile.mkstemp(dir=path.parent, suffix=".npz.tmp")
+    os.close(handle)
+    with open(temporary, "wb") as file:
+        np.savez_compressed(file, **arrays)
+    os.replace(temporary, path)

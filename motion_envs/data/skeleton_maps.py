@@ -1,0 +1,79 @@
+"""Declarative joint maps from known mocap skeletons to the body's 22 joints.
+
+A map is picked by the skeleton's joint names: every source joint it names
+must exist. Each body joint maps to one source joint (at the start of its
+bone; BVH end sites are joints named `<parent>_end`) or to None when the
+source has no counterpart (the body keeps that joint's local rotation at
+rest and its children absorb the difference).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from motion_envs.body.skeleton import JOINT_NAMES
+
+@dataclass(frozen=True)
+class SkeletonMap:
+    """How one source skeleton drives the body.
+
+    name: shown in reports. joints: body joint name -> source joint name or None.
+    leading_frames_to_skip: frames the converter prepended (e.g. a T-pose).
+    up_axis: the source's up axis ("y"; sources face +Z at rest).
+    """
+
+    name: str
+    joints: dict[str, str | None]
+    leading_frames_to_skip: int = 0
+    up_axis: str = "y"
+
+    def __post_init__(self) -> None:
+        if tuple(self.joints) != JOINT_NAMES:
+            raise ValueError(f"map {self.name!r} must list the body joints in order: {JOINT_NAMES}")
+        if self.joints["pelvis"] is None:
+            raise ValueError(f"map {self.name!r} must map the pelvis")
+
+    def source_names(self) -> set[str]:
+        return {name for name in self.joints.values() if name is not None}
+
+CMU_DAZ_BVH = SkeletonMap(
+    name="CMU cgspeed Daz-friendly BVH",
+    joints={
+        "pelvis": "hip", "left_hip": "lThigh", "right_hip": "rThigh", "spine1": "abdomen",
+        "left_knee": "lShin", "right_knee": "rShin", "spine2": "chest", "left_ankle": "lFoot",
+        "right_ankle": "rFoot", "spine3": None, "left_foot": "lFoot_end", "right_foot": "rFoot_end",
+        "neck": "neck", "left_collar": "lCollar", "right_collar": "rCollar", "head": "head",
+        "left_shoulder": "lShldr", "right_shoulder": "rShldr", "left_elbow": "lForeArm",
+        "right_elbow": "rForeArm", "left_wrist": "lHand", "right_wrist": "rHand",
+    },  # fmt: skip
+    leading_frames_to_skip=1,  # the converter's added T-pose
+)
+
+CMU_ACCLAIM = SkeletonMap(
+    name="CMU-style Acclaim ASF/AMC",
+    joints={
+        "pelvis": "root", "left_hip": "lfemur", "right_hip": "rfemur", "spine1": "upperback",
+        "left_knee": "ltibia", "right_knee": "rtibia", "spine2": "thorax", "left_ankle": "lfoot",
+        "right_ankle": "rfoot", "spine3": None, "left_foot": "ltoes", "right_foot": "rtoes",
+        "neck": "upperneck", "left_collar": "lclavicle", "right_collar": "rclavicle", "head": "head",
+        "left_shoulder": "lhumerus", "right_shoulder": "rhumerus", "left_elbow": "lradius",
+        "right_elbow": "rradius", "left_wrist": "lwrist", "right_wrist": "rwrist",
+    },  # fmt: skip
+)
+
+KNOWN_MAPS: tuple[SkeletonMap, ...] = (CMU_DAZ_BVH, CMU_ACCLAIM)
+
+class UnknownSkeletonError(ValueError):
+    """No known map fits a skeleton; the message lists its joints."""
+
+def match_skeleton(joint_names: tuple[str, ...] | list[str], source: str = "") -> SkeletonMap:
+    """The first known map whose source joints all exist in `joint_names`."""
+    present = set(joint_names)
+    for candidate in KNOWN_MAPS:
+        if candidate.source_names() <= present:
+            return candidate
+    known = ", ".join(m.name for m in KNOWN_MAPS)
+    raise UnknownSkeletonError(
+        f"{source or 'skeleton'}: no joint map fits its joints ({', '.join(joint_names)}); "
+        f"known skeletons: {known}. Add a SkeletonMap to motion_envs/data/skeleton_maps.py."
+    )

@@ -1,0 +1,129 @@
+"""Resampling, retargeting a real clip, canonicalisation, mirroring, splits and the cache."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import roma
+import torch
+
+from motion_envs.body import MIRROR_JOINTS
+from motion_envs.data.build import build, find_sources, load_clip
+from motion_envs.data.canonical import body_tensors, facing_angle, lowest_foot_points
+from motion_envs.data.dataset import MotionDataset
+from motion_envs.data.mirror import mirror
+from motion_envs.data.motion import BodyMotion
+from motion_envs.data.resample import resample_body, resample_times
+from motion_envs.data.retarget import RetargetConfig
+from motion_envs.data.splits import SPLITS, split_of
+from motion_envs.data.start_poses import load_start_poses
+
+
+def _random_motion(frames: int = 40, fps: float = 120.0, seed: int = 0) -> BodyMotion:
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0, 1, frames)[:, None]
+    smooth = lambda scale, *shape: scale * np.sin(2 * np.pi * t.reshape(-1, *[1] * len(shape)) + rng.normal(size=shape))  # noqa: E731
+    return BodyMotion("clip", "s", fps, smooth(1.0, 3), smooth(1.0, 3), smooth(0.4, 21, 3))
+
+
+def test_resampling_keeps_duration_and_is_continuous():
+    motion = _random_motion(frames=121, fps=120.0)
+    for fps in (30, 40):
+        out = resample_body(motion, fps)
+        assert out.fps == fps
+        assert (out.num_frames - 1) / fps == pytest.approx((motion.num_frames - 1) / motion.fps)
+        np.testing.assert_allclose(out.transl[0], motion.transl[0], atol=1e-12)
+        np.testing.assert_allclose(out.transl[-1], motion.transl[-1], atol=1e-12)
+        # frames that land on source frames reproduce them; rotations stay continuous
+        step = int(motion.fps // fps)
+        np.testing.assert_allclose(out.body_pose[::1], motion.body_pose[::step][: out.num_frames], atol=1e-9) if 120 % fps == 0 else None
+        rotations = roma.rotvec_to_rotmat(torch.as_tensor(out.body_pose))
+        jumps = roma.rotmat_geodesic_distance(rotations[1:], rotations[:-1])
+        source = roma.rotvec_to_rotmat(torch.as_tensor(motion.body_pose))
+        source_jumps = roma.rotmat_geodesic_distance(source[1:], source[:-1])
+        assert jumps.max() <= source_jumps.max() * (motion.fps / fps) * 1.01
+
+
+def test_resample_times_rejects_a_single_frame():
+    assert len(resample_times(121, 120, 30)) == 31
+    with pytest.raises(ValueError, match="two frames"):
+        resample_times(1, 120, 30)
+
+
+def test_mirroring_twice_is_exact_and_swaps_sides(body):
+    motion = _random_motion()
+    twice = mirror(mirror(motion))
+    np.testing.assert_allclose(twice.body_pose, motion.body_pose, atol=0)
+    np.testing.assert_allclose(twice.global_orient, motion.global_orient, atol=0)
+    joints = body(*body_tensors(motion)).joints
+    mirrored = body(*body_tensors(mirror(motion))).joints
+    expected = joints[:, list(MIRROR_JOINTS)] * torch.tensor([-1.0, 1.0, 1.0])
+    # exact up to the body's own left/right asymmetry (mannequin-x's SMPL-X skeleton, a few cm)
+    assert (mirrored - expected).norm(dim=-1).mean() < 0.03
+    rotations = body(*body_tensors(motion)).rotations[:, list(MIRROR_JOINTS)]
+    flip = torch.diag(torch.tensor([-1.0, 1.0, 1.0]))
+    assert torch.allclose(body(*body_tensors(mirror(motion))).rotations, flip @ rotations @ flip, atol=1e-5)
+
+
+def test_split_is_fixed_and_every_split_holds_cmu_walking():
+    walking_subjects = {"02", "05", "06", "07", "08", "10", "12"}
+    for split in SPLITS:
+        assert any(split_of(s) == split for s in walking_subjects)
+    assert split_of("somebody") == split_of("somebody") in SPLITS
+
+
+@pytest.mark.mocap
+@pytest.mark.parametrize("clip", ["cmu/07_01.bvh", "hdm05/HDM_bd_jogLeftCircle4StepsRstart_001_120.amc"])
+def test_real_clip_retargets_within_three_centimetres_and_is_canonical(mocap_dir, body, clip):
+    source = next(s for s in find_sources(mocap_dir) if s.relative == clip)
+    motion = load_clip(source, 30, body, RetargetConfig())
+    error = np.nanmean(motion.info["retarget_error"])
+    assert error < 0.03, f"{clip}: mean joint error {error * 100:.1f} cm"
+    with torch.no_grad():
+        first = body(*(t[:1] for t in body_tensors(motion))).joints[0].numpy()
+    np.testing.assert_allclose(first[0, :2], 0.0, atol=1e-5)  # pelvis over the origin
+    assert abs(facing_angle(first)) < 1e-4  # facing +y
+    assert abs(lowest_foot_points(motion, body)[0, 2]) < 1e-4  # lowest foot point on the ground
+
+
+def _write_amass_folder(folder, seed=0):
+    folder.mkdir(parents=True, exist_ok=True)
+    motion = _random_motion(frames=60, seed=seed)
+    np.savez(folder / "walk_poses.npz", trans=motion.transl, root_orient=np.tile([np.pi / 2, 0, 0], (60, 1)),
+             pose_body=0.3 * motion.body_pose.reshape(60, 63), mocap_framerate=120.0)  # fmt: skip
+
+
+def test_cache_rebuild_is_skipped_when_nothing_changed_and_redone_when_a_source_changes(tmp_path, capsys):
+    mocap = tmp_path / "mocap" / "subject1"
+    _write_amass_folder(mocap)
+    (mocap / "broken.bvh").write_text("HIERARCHY\nROOT hip\n{\n  OFFSET 0 0\n")
+    first = build(mocap_dir=tmp_path / "mocap", cache_dir=tmp_path / "cache", fps_list=(30,), progress=False)
+    assert first.rebuilt and first.clips == 1
+    assert len(first.failures) == 1 and "broken.bvh:4" in first.failures[0]
+    assert "skipped subject1/broken.bvh" in capsys.readouterr().err
+    dataset = MotionDataset.load(first.caches[30])
+    assert list(dataset.arrays["failures"]) == first.failures
+    assert dataset.clip(0).num_frames == 15  # 60 frames @ 120 fps -> 0.49 s @ 30 fps
+
+    again = build(mocap_dir=tmp_path / "mocap", cache_dir=tmp_path / "cache", fps_list=(30,), progress=False)
+    assert not again.rebuilt and again.caches == first.caches
+
+    _write_amass_folder(mocap, seed=1)
+    changed = build(mocap_dir=tmp_path / "mocap", cache_dir=tmp_path / "cache", fps_list=(30,), progress=False)
+    assert changed.rebuilt and changed.caches[30] != first.caches[30]
+
+
+def test_missing_mocap_folder_is_a_clear_error(tmp_path):
+    with pytest.raises(FileNotFoundError, match="does not exist"):
+        build(mocap_dir=tmp_path / "nowhere", cache_dir=tmp_path / "cache", progress=False)
+
+
+def test_shipped_start_poses_are_small_canonical_and_both_kinds(body):
+    for fps in (30, 40):
+        poses = load_start_poses(fps)
+        assert set(poses["kind"]) == {"standing", "walking"}
+        assert poses["body_pose"].shape[1:] == (10, 21, 3)
+        first = body(*(torch.as_tensor(poses[k][:, 0]) for k in ("transl", "global_orient", "body_pose"))).joints
+        np.testing.assert_allclose(first[:, 0, :2].numpy(), 0.0, atol=1e-4)
+    with pytest.raises(ValueError, match="no shipped start poses at 25 fps"):
+        load_start_poses(25)

@@ -69,12 +69,12 @@ class BodyModel(nn.Module):
         order = [j for level in levels for j in level]  # joints grouped by depth
         self._level_bounds = [(order.index(level[0]), order.index(level[0]) + len(level)) for level in levels]
         # parents of depth-d joints all have depth d-1: index them within that level
-        self._level_parent_slots = [
-            torch.tensor([levels[d - 1].index(PARENTS[j]) for j in levels[d]]) for d in range(1, len(levels))
-        ]
+        for depth in range(1, len(levels)):
+            slots = torch.tensor([levels[depth - 1].index(PARENTS[j]) for j in levels[depth]])
+            self.register_buffer(f"parent_slots_{depth}", slots, persistent=False)
         self.register_buffer("level_offsets", self.offsets[order], persistent=False)
-        self._pose_order = torch.tensor([j - 1 for j in order[1:]])  # body_pose rows in depth order
-        self._joint_slot = torch.tensor([order.index(j) for j in range(NUM_JOINTS)])
+        self.register_buffer("pose_order", torch.tensor([j - 1 for j in order[1:]]), persistent=False)
+        self.register_buffer("joint_slot", torch.tensor([order.index(j) for j in range(NUM_JOINTS)]), persistent=False)
 
     @property
     def num_vertices(self) -> int:
@@ -110,16 +110,17 @@ class BodyModel(nn.Module):
             )
         root = rotation_matrix(global_orient).reshape(-1, 1, 3, 3)
         pose = body_pose.reshape(-1, NUM_BODY_POSE_JOINTS, body_pose.shape[-1])
-        local = self._local_rotations_in_world_axes(pose.index_select(1, self._pose_order))
+        local = self._local_rotations_in_world_axes(pose.index_select(1, self.pose_order))
         rotations = [root]
         positions = [transl.reshape(-1, 1, 3)]
-        for (start, stop), slots in zip(self._level_bounds[1:], self._level_parent_slots):
+        for depth, (start, stop) in enumerate(self._level_bounds[1:], start=1):
+            slots = getattr(self, f"parent_slots_{depth}")
             parent_rot = rotations[-1].index_select(1, slots)
             rotations.append(torch.einsum("bkij,bkjl->bkil", parent_rot, local[:, start - 1 : stop - 1]))
             offsets = self.level_offsets[start:stop]
             positions.append(positions[-1].index_select(1, slots) + torch.einsum("bkij,kj->bki", parent_rot, offsets))
-        joint_rot = torch.cat(rotations, dim=1).index_select(1, self._joint_slot)
-        joint_pos = torch.cat(positions, dim=1).index_select(1, self._joint_slot)
+        joint_rot = torch.cat(rotations, dim=1).index_select(1, self.joint_slot)
+        joint_pos = torch.cat(positions, dim=1).index_select(1, self.joint_slot)
         return BodyPose(
             joints=joint_pos.reshape(*batch, NUM_JOINTS, 3),
             rotations=joint_rot.reshape(*batch, NUM_JOINTS, 3, 3),

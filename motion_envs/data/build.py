@@ -31,6 +31,12 @@ from motion_envs.data.retarget import RetargetConfig, retarget
 from motion_envs.data.skeleton_maps import UnknownSkeletonError, match_skeleton
 from motion_envs.data.splits import split_of
 
+CACHE_CODE = (
+    "data/amass.py", "data/asf_amc.py", "data/build.py", "data/bvh.py", "data/canonical.py",
+    "data/motion.py", "data/resample.py", "data/retarget.py", "data/skeleton_maps.py",
+    "data/splits.py", "body/frames.py", "body/markers.py", "body/skeleton.py",
+)  # fmt: skip
+"""Modules whose code decides the cache's content (the FK implementation changes speed only)."""
 DEFAULT_FPS = (30, 40)
 """WANDR runs at 30 fps, GAMMA at 40 fps."""
 CACHE_FORMAT = 1
@@ -88,13 +94,11 @@ def _asf_for(amc: Path) -> Path | None:
 
 
 def content_hash(sources: list[ClipSource], fps: int, retarget_config: RetargetConfig) -> str:
-    """sha256 over the source bytes, the data code, the body definition, mannequin-x's version
-    and the settings (the FK implementation is left out: it changes speed, not results)."""
+    """sha256 over the source bytes, `CACHE_CODE`, mannequin-x's version and the settings."""
     digest = hashlib.sha256(f"{CACHE_FORMAT}|{fps}|{retarget_config}|{version('mannequin-x')}".encode())
     package = Path(__file__).resolve().parents[1]
-    body_definition = [package / "body" / name for name in ("frames.py", "skeleton.py", "markers.py")]
-    for code in sorted([*package.joinpath("data").glob("*.py"), *body_definition]):
-        digest.update(code.read_bytes())
+    for code in CACHE_CODE:
+        digest.update((package / code).read_bytes())
     for source in sources:
         digest.update(source.relative.encode())
         for path in (source.path, source.skeleton):
@@ -190,4 +194,5 @@ def _write_cache(path: Path, clips: list[tuple[ClipSource, BodyMotion]], failure
     os.close(handle)
     with open(temporary, "wb") as file:
         np.savez_compressed(file, **arrays)
+    os.chmod(temporary, 0o644)
     os.replace(temporary, path)

@@ -23,6 +23,7 @@ scaled source joints is reported beside it.
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 
 import numpy as np
@@ -127,7 +128,7 @@ def retarget(
     orient = init_orient.clone().requires_grad_(True)
     pose = init_pose.clone().requires_grad_(True)
     transl = target[:, 0].clone().requires_grad_(True)
-    model = body.double()
+    model = copy.deepcopy(body).double()  # refine in float64; the caller's body stays as it is
     optimiser = torch.optim.Adam([orient, pose, transl], lr=config.learning_rate)
     for _ in range(config.iterations):
         optimiser.zero_grad()
@@ -141,7 +142,6 @@ def retarget(
         error = (joints - target).norm(dim=-1).numpy()
         global_orient = roma.rotmat_to_rotvec(rotation_matrix(orient)).numpy()
         body_pose = roma.rotmat_to_rotvec(rotation_matrix(pose)).numpy()
-    body.float()
     error[:, ~mapped] = np.nan
     motion = BodyMotion(
         name=name,

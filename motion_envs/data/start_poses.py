@@ -26,9 +26,11 @@ from motion_envs.data.motion import BodyMotion
 
 WINDOW = 10
 PER_KIND = 24
-STANDING_SPEED = (0.0, 0.15)
+STANDING_SPEED = (0.0, 0.25)
 WALKING_SPEED = (0.7, 1.8)
-"""Pelvis ground speed (m/s) over a window for each kind."""
+"""Pelvis ground speed (m/s) over a window for each kind. Standing is rare in the
+validation clips (mostly the first frames of walks), so its windows are searched
+frame by frame; walking windows every half second."""
 
 
 def _windows(clip: BodyMotion, speed: tuple[float, float], stride: int) -> list[int]:
@@ -43,7 +45,8 @@ def select_start_poses(dataset: MotionDataset, body: BodyModel) -> dict[str, np.
     clips = dataset.clips("validation")
     chosen: dict[str, list] = {key: [] for key in ("transl", "global_orient", "body_pose", "kind", "clip", "frame")}
     for kind, speed in (("standing", STANDING_SPEED), ("walking", WALKING_SPEED)):
-        candidates = [(clip, start) for clip in clips for start in _windows(clip, speed, stride=dataset.fps // 2)]
+        stride = 1 if kind == "standing" else dataset.fps // 2
+        candidates = [(clip, start) for clip in clips for start in _windows(clip, speed, stride)]
         if not candidates:
             raise RuntimeError(f"no {kind} windows in the validation clips")
         picks = np.linspace(0, len(candidates) - 1, min(PER_KIND, len(candidates))).round().astype(int)
@@ -81,6 +84,7 @@ def write_start_poses(
     os.close(handle)
     with open(temporary, "wb") as file:
         np.savez_compressed(file, **arrays)
+    os.chmod(temporary, 0o644)
     os.replace(temporary, destination)
     return destination
 

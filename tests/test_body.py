@@ -153,3 +153,21 @@ def test_mirror_joints_swap_sides():
 def test_wrong_shapes_raise_naming_the_argument(body, transl, orient, pose, message):
     with pytest.raises(ValueError, match=message):
         body(torch.zeros(transl), torch.zeros(orient), torch.zeros(pose))
+
+
+def test_rodrigues_matches_roma_and_has_finite_gradients_at_zero(generator):
+    from motion_envs.body.rotations import axis_angle_to_matrix
+
+    rotvec = torch.cat([torch.randn(1000, 3, generator=generator), 1e-6 * torch.randn(10, 3, generator=generator)])
+    assert torch.allclose(axis_angle_to_matrix(rotvec), roma.rotvec_to_rotmat(rotvec), atol=2e-6)
+    zero = torch.zeros(4, 3, requires_grad=True)
+    axis_angle_to_matrix(zero).sum().backward()
+    assert torch.isfinite(zero.grad).all()
+
+
+def test_batch_dimensions_are_kept(body):
+    pose = body(torch.zeros(2, 5, 3), torch.zeros(2, 5, 3), torch.zeros(2, 5, 21, 3))
+    assert pose.joints.shape == (2, 5, 22, 3) and pose.rotations.shape == (2, 5, 22, 3, 3)
+    assert body.skin(pose, marker_ids()).shape == (2, 5, 67, 3)
+    single = body(torch.zeros(3), torch.zeros(3), torch.zeros(21, 3))
+    assert single.joints.shape == (22, 3)

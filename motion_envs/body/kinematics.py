@@ -13,6 +13,13 @@ Parameter convention (documented once here, used everywhere):
   unchanged.
 
 Returned rotations are world rotations of each joint frame, identity at rest.
+
+How it is fast: joints are composed one depth level at a time (SMPL-X orders
+joints by depth, so each level is a contiguous slice), as transposed
+rotations Rᵀ. Every joint position and every skinned vertex is then linear
+in the stacked Rᵀ rows plus the pelvis position, so each is one GEMM with a
+fixed matrix: positions with the bone-offset chains, vertices with blend
+weights times rest offsets folded through those chains.
 """
 
 from __future__ import annotations
@@ -24,8 +31,11 @@ import torch
 from torch import nn
 
 from motion_envs.body.frames import MANNEQUIN_TO_WORLD
-from motion_envs.body.rotations import rotation_matrix
+from motion_envs.body.rotations import rodrigues, rotation_matrix
 from motion_envs.body.skeleton import NUM_BODY_POSE_JOINTS, NUM_JOINTS, PARENTS, rest_body
+
+FRAME_ROWS = NUM_JOINTS * 3 + 1
+"""Rows of `BodyPose.frame_rows`: (joint j, axis b) -> column b of joint j's rotation; last: the pelvis."""
 
 
 class BodyPose(NamedTuple):
@@ -33,17 +43,21 @@ class BodyPose(NamedTuple):
 
     joints: (..., 22, 3) world joint positions.
     rotations: (..., 22, 3, 3) world joint rotations (identity at rest).
+    frame_rows: (67, B * 3) the rotations and the pelvis position rearranged
+        so that any point fixed to the skeleton is one matrix product away
+        (B = batch size); used by `BodyModel.skin`.
     """
 
     joints: torch.Tensor
     rotations: torch.Tensor
+    frame_rows: torch.Tensor
 
 
-def _levels(parents: tuple[int, ...]) -> list[list[int]]:
+def _depths(parents: tuple[int, ...]) -> list[int]:
     depth = [0] * len(parents)
     for joint in range(1, len(parents)):
         depth[joint] = depth[parents[joint]] + 1
-    return [[j for j in range(len(parents)) if depth[j] == d] for d in range(max(depth) + 1)]
+    return depth
 
 
 class BodyModel(nn.Module):
@@ -62,19 +76,36 @@ class BodyModel(nn.Module):
         self.register_buffer("skin_joints", torch.as_tensor(rest.skin_joints, dtype=torch.long))
         self.register_buffer("skin_offsets", torch.as_tensor(rest.skin_offsets, dtype=torch.float32))
         self.register_buffer("skin_weights", torch.as_tensor(rest.skin_weights, dtype=torch.float32))
-        self.register_buffer(
-            "axes_to_world", torch.as_tensor(MANNEQUIN_TO_WORLD, dtype=torch.float32)
-        )
-        levels = _levels(PARENTS)
-        order = [j for level in levels for j in level]  # joints grouped by depth
-        self._level_bounds = [(order.index(level[0]), order.index(level[0]) + len(level)) for level in levels]
-        # parents of depth-d joints all have depth d-1: index them within that level
-        for depth in range(1, len(levels)):
-            slots = torch.tensor([levels[depth - 1].index(PARENTS[j]) for j in levels[depth]])
-            self.register_buffer(f"parent_slots_{depth}", slots, persistent=False)
-        self.register_buffer("level_offsets", self.offsets[order], persistent=False)
-        self.register_buffer("pose_order", torch.tensor([j - 1 for j in order[1:]]), persistent=False)
-        self.register_buffer("joint_slot", torch.tensor([order.index(j) for j in range(NUM_JOINTS)]), persistent=False)
+        self.register_buffer("axes_to_world", torch.as_tensor(MANNEQUIN_TO_WORLD, dtype=torch.float32))
+
+        depth = _depths(PARENTS)
+        if depth != sorted(depth):
+            raise RuntimeError("body joints must be ordered by depth (SMPL-X's order is)")
+        # joints of one depth are contiguous; their parents lie in the previous depth
+        self._levels: list[tuple[int, int, slice | str]] = []
+        for level in range(1, max(depth) + 1):
+            start, stop = depth.index(level), len(depth) - depth[::-1].index(level)
+            first = depth.index(level - 1)
+            slots = [PARENTS[j] - first for j in range(start, stop)]
+            if slots == list(range(slots[0], slots[-1] + 1)):
+                self._levels.append((start, stop, slice(slots[0], slots[-1] + 1)))
+            else:
+                self.register_buffer(f"parent_slots_{level}", torch.tensor(slots), persistent=False)
+                self._levels.append((start, stop, f"parent_slots_{level}"))
+
+        # joint j = pelvis + sum over the bones i on its chain of R_parent(i) offset_i
+        chains = torch.zeros(NUM_JOINTS, NUM_JOINTS, 3)  # [j, parent, b]
+        for joint in range(1, NUM_JOINTS):
+            bone = joint
+            while bone > 0:
+                chains[joint, PARENTS[bone]] += self.offsets[bone]
+                bone = PARENTS[bone]
+        chain_rows = torch.cat([chains.reshape(NUM_JOINTS, FRAME_ROWS - 1), torch.ones(NUM_JOINTS, 1)], dim=1)
+        self.register_buffer("chain_rows", chain_rows, persistent=False)
+
+        axes = np.asarray(MANNEQUIN_TO_WORLD)
+        self._axis_permutation = [int(i) for i in np.abs(axes).argmax(axis=1)]
+        self._axis_signs = [float(axes[i, j]) for i, j in enumerate(self._axis_permutation)]
 
     @property
     def num_vertices(self) -> int:
@@ -108,37 +139,50 @@ class BodyModel(nn.Module):
                 f"body_pose must be {(*batch, NUM_BODY_POSE_JOINTS, 3)} or "
                 f"{(*batch, NUM_BODY_POSE_JOINTS, 6)}, got {tuple(body_pose.shape)}"
             )
-        root = rotation_matrix(global_orient).reshape(-1, 1, 3, 3)
-        pose = body_pose.reshape(-1, NUM_BODY_POSE_JOINTS, body_pose.shape[-1])
-        local = self._local_rotations_in_world_axes(pose.index_select(1, self.pose_order))
-        rotations = [root]
-        positions = [transl.reshape(-1, 1, 3)]
-        for depth, (start, stop) in enumerate(self._level_bounds[1:], start=1):
-            slots = getattr(self, f"parent_slots_{depth}")
-            parent_rot = rotations[-1].index_select(1, slots)
-            rotations.append(torch.einsum("bkij,bkjl->bkil", parent_rot, local[:, start - 1 : stop - 1]))
-            offsets = self.level_offsets[start:stop]
-            positions.append(positions[-1].index_select(1, slots) + torch.einsum("bkij,kj->bki", parent_rot, offsets))
-        joint_rot = torch.cat(rotations, dim=1).index_select(1, self.joint_slot)
-        joint_pos = torch.cat(positions, dim=1).index_select(1, self.joint_slot)
+        size = int(np.prod(batch)) if batch else 1
+        root = self._root_transposed(global_orient.reshape(size, global_orient.shape[-1]))
+        local = self._local_transposed(body_pose.reshape(size, NUM_BODY_POSE_JOINTS, body_pose.shape[-1]))
+        levels = [root[:, None]]
+        for start, stop, slots in self._levels:
+            parents = levels[-1][:, slots] if isinstance(slots, slice) else levels[-1].index_select(1, getattr(self, slots))
+            levels.append(local[:, start - 1 : stop - 1] @ parents)  # (R_p L)ᵀ = Lᵀ R_pᵀ
+        transposed = torch.cat(levels, dim=1)  # (B, 22, 3, 3): [n, j, b, a] = R_j[a, b]
+        rows = torch.cat(  # one pass: rearrange the rotations and append the pelvis
+            [transposed.reshape(size, FRAME_ROWS - 1, 3).permute(1, 0, 2), transl.reshape(1, size, 3)], dim=0
+        ).reshape(FRAME_ROWS, size * 3)
+        joints = (self.chain_rows.to(rows.dtype) @ rows).reshape(NUM_JOINTS, size, 3).transpose(0, 1)
         return BodyPose(
-            joints=joint_pos.reshape(*batch, NUM_JOINTS, 3),
-            rotations=joint_rot.reshape(*batch, NUM_JOINTS, 3, 3),
+            joints=joints.reshape(*batch, NUM_JOINTS, 3),
+            rotations=transposed.transpose(-1, -2).reshape(*batch, NUM_JOINTS, 3, 3),
+            frame_rows=rows,
         )
 
-    def _local_rotations_in_world_axes(self, body_pose: torch.Tensor) -> torch.Tensor:
-        """(B, 21, 3|6) SMPL-X local rotations -> (B, 21, 3, 3) conjugated into world axes."""
-        axes = self.axes_to_world.to(body_pose.dtype)
+    def _root_transposed(self, global_orient: torch.Tensor) -> torch.Tensor:
+        """(B, 3|6) -> (B, 3, 3) transposed pelvis rotation."""
+        if global_orient.shape[-1] == 3:
+            x, y, z = (-global_orient).movedim(-1, 0)  # R(-a) = R(a)ᵀ
+            return rodrigues(x, y, z)
+        return rotation_matrix(global_orient).transpose(-1, -2)
+
+    def _local_transposed(self, body_pose: torch.Tensor) -> torch.Tensor:
+        """(B, 21, 3|6) SMPL-X local rotations -> (B, 21, 3, 3) transposed, in world axes.
+
+        Conjugating by the axes map rotates the rotation axis; the map is a
+        signed permutation, so that is picking and negating planes.
+        """
         if body_pose.shape[-1] == 3:
-            return rotation_matrix(body_pose @ axes.T)  # a rotated axis is the conjugated rotation
-        return axes @ rotation_matrix(body_pose) @ axes.T
+            planes = body_pose.movedim(-1, 0)
+            x, y, z = (-sign * planes[axis] for axis, sign in zip(self._axis_permutation, self._axis_signs))
+            return rodrigues(x, y, z)
+        axes = self.axes_to_world.to(body_pose.dtype)
+        return (axes @ rotation_matrix(body_pose) @ axes.T).transpose(-1, -2)
 
     def skin(self, pose: BodyPose, vertex_ids: torch.Tensor) -> torch.Tensor:
-        """Linear-blend skinning of a vertex subset.
+        """Linear-blend skinning of a vertex subset of a pose from `forward`.
 
-        Each vertex is sum_k w_k (R_k o_k + t_k); stacking every joint's
-        [R | t] as a (3, 22 * 4) matrix turns the whole subset into one matmul
-        with a (22 * 4, V) coefficient matrix of weights times [o_k; 1].
+        A vertex is sum_k w_k (R_k o_k + t_k); with the joint positions t
+        themselves linear in the rotation rows and the pelvis position, it is
+        one (V, 67) matrix times `pose.frame_rows`.
 
         Args:
             pose: output of `forward` with batch shape (...).
@@ -147,17 +191,21 @@ class BodyModel(nn.Module):
         Returns:
             (..., V, 3) world vertex positions.
         """
-        dtype = pose.joints.dtype
-        coefficients = self.skin_coefficients(vertex_ids).to(dtype)  # (22 * 4, V)
-        transforms = torch.cat([pose.rotations, pose.joints[..., None]], dim=-1)  # (..., 22, 3, 4)
-        stacked = transforms.transpose(-3, -2).reshape(*transforms.shape[:-3], 3, NUM_JOINTS * 4)
-        return (stacked @ coefficients).transpose(-1, -2)
+        rows = pose.frame_rows
+        size = rows.shape[1] // 3
+        reading = self.skin_rows(vertex_ids).to(rows.dtype)
+        vertices = (reading @ rows).reshape(len(vertex_ids), size, 3).transpose(0, 1)
+        return vertices.reshape(*pose.joints.shape[:-2], len(vertex_ids), 3)
 
-    def skin_coefficients(self, vertex_ids: torch.Tensor) -> torch.Tensor:
-        """(22 * 4, V) matrix: entry (4 j + b, v) = sum over v's influences on joint j of w * [o; 1][b]."""
+    def skin_rows(self, vertex_ids: torch.Tensor) -> torch.Tensor:
+        """(V, 67) matrix taking `BodyPose.frame_rows` to vertex positions."""
         joints = self.skin_joints[vertex_ids]  # (V, K)
-        homogeneous = torch.cat([self.skin_offsets[vertex_ids], torch.ones_like(self.skin_weights[vertex_ids, :, None])], -1)
-        weighted = homogeneous * self.skin_weights[vertex_ids, :, None]  # (V, K, 4)
-        coefficients = torch.zeros(len(vertex_ids), NUM_JOINTS, 4, dtype=weighted.dtype, device=weighted.device)
-        coefficients.index_put_((torch.arange(len(vertex_ids), device=joints.device)[:, None], joints), weighted, accumulate=True)
-        return coefficients.reshape(len(vertex_ids), NUM_JOINTS * 4).T
+        weights = self.skin_weights[vertex_ids]  # (V, K)
+        count = len(vertex_ids)
+        vertex = torch.arange(count, device=joints.device)[:, None]
+        rotated = torch.zeros(count, NUM_JOINTS, 3, dtype=weights.dtype, device=weights.device)
+        rotated.index_put_((vertex, joints), self.skin_offsets[vertex_ids] * weights[..., None], accumulate=True)
+        translated = torch.zeros(count, NUM_JOINTS, dtype=weights.dtype, device=weights.device)
+        translated.index_put_((vertex, joints), weights, accumulate=True)
+        rows = torch.cat([rotated.reshape(count, FRAME_ROWS - 1), torch.zeros_like(translated[:, :1])], dim=1)
+        return rows + translated @ self.chain_rows

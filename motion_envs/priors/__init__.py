@@ -1,0 +1,1 @@
+"""Motion priors: GAMMA marker primitives, WANDR, CLOPS (nn.Modules, load/save, training)."""

@@ -1,0 +1,44 @@
+"""GAMMA's canonical frame of a motion primitive (batched torch).
+
+Origin: the pelvis of the first seed frame. x: right hip minus left hip with
+z zeroed, normalised; z: world up; y = z × x, the body's forward. Points go
+into the frame with `to_canonical` and back with `to_world`.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import torch
+
+from motion_envs.body import joint_index
+
+PELVIS, LEFT_HIP, RIGHT_HIP = joint_index("pelvis"), joint_index("left_hip"), joint_index("right_hip")
+
+
+class CanonicalFrame(NamedTuple):
+    """origin: (..., 3). rotation: (..., 3, 3) whose columns are the frame's x, y, z in world axes."""
+
+    origin: torch.Tensor
+    rotation: torch.Tensor
+
+
+def canonical_frame(joints: torch.Tensor) -> CanonicalFrame:
+    """The canonical frame of bodies with joints (..., 22, 3) (one frame each)."""
+    across = joints[..., RIGHT_HIP, :] - joints[..., LEFT_HIP, :]
+    x = torch.stack([across[..., 0], across[..., 1], torch.zeros_like(across[..., 0])], dim=-1)
+    x = x / x.norm(dim=-1, keepdim=True).clamp_min(1e-8)
+    z = torch.zeros_like(x)
+    z[..., 2] = 1.0
+    y = torch.cross(z, x, dim=-1)
+    return CanonicalFrame(joints[..., PELVIS, :], torch.stack([x, y, z], dim=-1))
+
+
+def to_canonical(points: torch.Tensor, frame: CanonicalFrame) -> torch.Tensor:
+    """(..., P, 3) world points -> canonical coordinates; frame batch (...)."""
+    return (points - frame.origin[..., None, :]) @ frame.rotation
+
+
+def to_world(points: torch.Tensor, frame: CanonicalFrame) -> torch.Tensor:
+    """(..., P, 3) canonical points -> world coordinates."""
+    return points @ frame.rotation.transpose(-1, -2) + frame.origin[..., None, :]

@@ -1,0 +1,242 @@
+"""GAMMA's generative motion primitives (Zhang & Tang, CVPR 2022) as torch modules.
+
+* `MarkerCVAE`: the marker predictor. Seed X (1 or 2 frames of 67 markers,
+  canonical) and future Y (10 - |X| frames); GRU encoders of X and Y feed an
+  MLP to the latent z; a GRU-cell decoder predicts each next frame as a
+  residual on the previous one from [seed state, z, previous frame]. Sizes
+  follow the authors' release (REFERENCE_NOTES §1.3): hidden 256, z 128,
+  MLP [512, 256], tanh after every linear layer of the MLPs.
+* `BodyRegressor`: markers -> body parameters, a residual MLP applied three
+  times, each time refining its own estimate (6-D rotations inside), as the
+  release's MoshRegressor (hidden 128, 10 blocks, 3 recursions). One network:
+  our body has one shape and fixed hands, so the gender split, betas and hand
+  PCA of the paper are dropped.
+* `PoseVAE`: a small VAE over single body poses standing in for VPoser in
+  r_vposer (VPoser's weights are not redistributable and are SMPL-X's).
+
+Losses are pure functions below (`predictor_loss`, `robust_kl`, ...).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import torch
+from torch import nn
+
+from motion_envs.body.rotations import matrix_to_axis_angle, matrix_to_sixd, rotation_matrix
+from motion_envs.body.skeleton import NUM_BODY_POSE_JOINTS
+from motion_envs.data.primitives import PRIMITIVE_FRAMES
+
+NUM_MARKERS = 67
+MARKER_DIM = NUM_MARKERS * 3
+BODY_DIM = 3 + 6 + NUM_BODY_POSE_JOINTS * 6
+"""Regressor estimate: transl (3), global orient 6-D (6), 21 joints 6-D (126)."""
+
+
+def tanh_mlp(sizes: list[int]) -> nn.Sequential:
+    """Linear layers of the given sizes with tanh after every one (the release's MLP)."""
+    layers: list[nn.Module] = []
+    for fan_in, fan_out in zip(sizes[:-1], sizes[1:]):
+        layers += [nn.Linear(fan_in, fan_out), nn.Tanh()]
+    return nn.Sequential(*layers)
+
+
+@dataclass(frozen=True)
+class MarkerCVAEConfig:
+    seed_frames: int = 2
+    hidden: int = 256
+    latent: int = 128
+    mlp: tuple[int, ...] = (512, 256)
+
+    @property
+    def future_frames(self) -> int:
+        return PRIMITIVE_FRAMES - self.seed_frames
+
+
+class MarkerCVAE(nn.Module):
+    """Marker predictor: seed (B, S, 201) + z (B, 128) -> future (B, 10 - S, 201)."""
+
+    def __init__(self, config: MarkerCVAEConfig = MarkerCVAEConfig()) -> None:
+        super().__init__()
+        if config.seed_frames not in (1, 2):
+            raise ValueError(f"seed_frames must be 1 or 2, got {config.seed_frames}")
+        self.config = config
+        hidden, latent = config.hidden, config.latent
+        self.seed_encoder = nn.GRU(MARKER_DIM, hidden, batch_first=True)
+        self.future_encoder = nn.GRU(MARKER_DIM, hidden, batch_first=True)
+        self.posterior = tanh_mlp([2 * hidden, *config.mlp])
+        self.mean = nn.Linear(config.mlp[-1], latent)
+        self.log_variance = nn.Linear(config.mlp[-1], latent)
+        self.initial_state = tanh_mlp([hidden, 512, 256, hidden])
+        self.cell = nn.GRUCell(hidden + latent + MARKER_DIM, hidden)
+        self.readout = nn.Sequential(tanh_mlp([hidden, *config.mlp]), nn.Linear(config.mlp[-1], MARKER_DIM))
+
+    def seed_state(self, seed: torch.Tensor) -> torch.Tensor:
+        """(B, S, 201) -> (B, hidden) final GRU state of the seed."""
+        self._check(seed, self.config.seed_frames, "seed")
+        return self.seed_encoder(seed)[1][0]
+
+    def encode(self, seed: torch.Tensor, future: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Posterior q(z | X, Y): mean and log-variance, (B, latent) each."""
+        self._check(future, self.config.future_frames, "future")
+        features = torch.cat([self.seed_state(seed), self.future_encoder(future)[1][0]], dim=-1)
+        hidden = self.posterior(features)
+        return self.mean(hidden), self.log_variance(hidden)
+
+    def decode(self, seed: torch.Tensor, z: torch.Tensor) -> torch.Tensor:
+        """(B, S, 201) seed and (B, latent) z -> (B, 10 - S, 201) predicted markers."""
+        context = self.seed_state(seed)
+        state = self.initial_state(context)
+        previous = seed[:, -1]
+        frames = []
+        for _ in range(self.config.future_frames):  # 8 or 9 steps of one primitive, batched over bodies
+            state = self.cell(torch.cat([context, z, previous], dim=-1), state)
+            previous = previous + self.readout(state)
+            frames.append(previous)
+        return torch.stack(frames, dim=1)
+
+    def forward(self, seed: torch.Tensor, future: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Reconstruction through the posterior: (B, 10 - S, 201), mean, log-variance."""
+        mean, log_variance = self.encode(seed, future)
+        z = mean + torch.randn_like(mean) * torch.exp(0.5 * log_variance)
+        return self.decode(seed, z), mean, log_variance
+
+    def _check(self, frames: torch.Tensor, count: int, name: str) -> None:
+        if frames.ndim != 3 or frames.shape[1:] != (count, MARKER_DIM):
+            raise ValueError(f"{name} must be (B, {count}, {MARKER_DIM}), got {tuple(frames.shape)}")
+
+
+def kl_to_standard_normal(mean: torch.Tensor, log_variance: torch.Tensor) -> torch.Tensor:
+    """(..., D) -> (...) KL(N(mean, exp(log_variance)) || N(0, I)) averaged over D (the release's scale)."""
+    return 0.5 * (mean.pow(2) + log_variance.exp() - 1.0 - log_variance).mean(dim=-1)
+
+
+def robust_kl(kl: torch.Tensor) -> torch.Tensor:
+    """Ψ(s) = sqrt(1 + s²) − 1 (GAMMA Eq. 1): small KL gets a small gradient, against posterior collapse."""
+    return torch.sqrt(1.0 + kl.pow(2)) - 1.0
+
+
+def predictor_loss(
+    seed: torch.Tensor,
+    future: torch.Tensor,
+    reconstruction: torch.Tensor,
+    mean: torch.Tensor,
+    log_variance: torch.Tensor,
+    difference_weight: float = 3.0,
+) -> dict[str, torch.Tensor]:
+    """GAMMA Eq. 1: |Y − Y_rec| + 3 |ΔY − ΔY_rec| + Ψ(KL). Differences include the step from the last seed frame."""
+    target = torch.cat([seed[:, -1:], future], dim=1)
+    predicted = torch.cat([seed[:, -1:], reconstruction], dim=1)
+    terms = {
+        "reconstruction": (future - reconstruction).abs().mean(),
+        "difference": (target.diff(dim=1) - predicted.diff(dim=1)).abs().mean(),
+        "kl": robust_kl(kl_to_standard_normal(mean, log_variance).mean()),
+    }
+    terms["total"] = terms["reconstruction"] + difference_weight * terms["difference"] + terms["kl"]
+    return terms
+
+
+@dataclass(frozen=True)
+class BodyRegressorConfig:
+    hidden: int = 128
+    blocks: int = 10
+    recursions: int = 3
+
+
+class ResidualBlock(nn.Module):
+    def __init__(self, width: int) -> None:
+        super().__init__()
+        self.layers = nn.Sequential(nn.Linear(width, width), nn.ReLU(), nn.Linear(width, width), nn.ReLU())
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return x + self.layers(x)
+
+
+class BodyRegressor(nn.Module):
+    """Markers (..., 67, 3) in a primitive's canonical frame -> body parameters of the same frame."""
+
+    def __init__(self, config: BodyRegressorConfig = BodyRegressorConfig()) -> None:
+        super().__init__()
+        self.config = config
+        self.net = nn.Sequential(
+            nn.Linear(MARKER_DIM + BODY_DIM, config.hidden),
+            *[ResidualBlock(config.hidden) for _ in range(config.blocks)],
+            nn.Linear(config.hidden, BODY_DIM),
+        )
+
+    def forward(self, markers: torch.Tensor) -> dict[str, torch.Tensor]:
+        """Returns transl (..., 3), global_orient (..., 6) and body_pose (..., 21, 6), 6-D rotations."""
+        if markers.shape[-2:] != (NUM_MARKERS, 3):
+            raise ValueError(f"markers must end in ({NUM_MARKERS}, 3), got {tuple(markers.shape)}")
+        flat = markers.reshape(-1, MARKER_DIM)
+        estimate = torch.zeros(flat.shape[0], BODY_DIM, dtype=flat.dtype, device=flat.device)
+        for _ in range(self.config.recursions):
+            estimate = estimate + self.net(torch.cat([flat, estimate], dim=-1))
+        batch = markers.shape[:-2]
+        return {
+            "transl": estimate[:, :3].reshape(*batch, 3),
+            "global_orient": estimate[:, 3:9].reshape(*batch, 6),
+            "body_pose": estimate[:, 9:].reshape(*batch, NUM_BODY_POSE_JOINTS, 6),
+        }
+
+
+def to_axis_angle(params: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+    """Regressor output with 6-D rotations -> the same with axis-angle rotations."""
+    return {
+        "transl": params["transl"],
+        "global_orient": matrix_to_axis_angle(rotation_matrix(params["global_orient"])),
+        "body_pose": matrix_to_axis_angle(rotation_matrix(params["body_pose"])),
+    }
+
+
+@dataclass(frozen=True)
+class PoseVAEConfig:
+    hidden: int = 256
+    latent: int = 32
+
+
+class PoseVAE(nn.Module):
+    """A VAE over single body poses (21 joints, 6-D in, 6-D out)."""
+
+    def __init__(self, config: PoseVAEConfig = PoseVAEConfig()) -> None:
+        super().__init__()
+        self.config = config
+        width = NUM_BODY_POSE_JOINTS * 6
+        self.encoder = nn.Sequential(
+            nn.Linear(width, config.hidden), nn.LeakyReLU(0.2), nn.Linear(config.hidden, config.hidden), nn.LeakyReLU(0.2)
+        )
+        self.mean = nn.Linear(config.hidden, config.latent)
+        self.log_variance = nn.Linear(config.hidden, config.latent)
+        self.decoder = nn.Sequential(
+            nn.Linear(config.latent, config.hidden), nn.LeakyReLU(0.2),
+            nn.Linear(config.hidden, config.hidden), nn.LeakyReLU(0.2), nn.Linear(config.hidden, width),
+        )  # fmt: skip
+
+    def encode(self, body_pose: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(..., 21, 3 | 6) poses -> mean, log-variance (..., latent)."""
+        sixd = matrix_to_sixd(rotation_matrix(body_pose)).flatten(-2)
+        hidden = self.encoder(sixd)
+        return self.mean(hidden), self.log_variance(hidden)
+
+    def decode(self, z: torch.Tensor) -> torch.Tensor:
+        """(..., latent) -> (..., 21, 3, 3) rotation matrices."""
+        return rotation_matrix(self.decoder(z).unflatten(-1, (NUM_BODY_POSE_JOINTS, 6)))
+
+
+def pose_vae_loss(model: PoseVAE, body_pose: torch.Tensor, kl_weight: float = 5e-3) -> dict[str, torch.Tensor]:
+    """Rotation-matrix reconstruction (MSE) + kl_weight · KL."""
+    mean, log_variance = model.encode(body_pose)
+    z = mean + torch.randn_like(mean) * torch.exp(0.5 * log_variance)
+    target = rotation_matrix(body_pose)
+    terms = {
+        "reconstruction": (model.decode(z) - target).pow(2).mean(),
+        "kl": kl_to_standard_normal(mean, log_variance).mean(),
+    }
+    terms["total"] = terms["reconstruction"] + kl_weight * terms["kl"]
+    return terms
+
+
+def config_dict(config: object) -> dict:
+    """A frozen config as a plain dict (what checkpoints store)."""
+    return asdict(config)

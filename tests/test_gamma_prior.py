@@ -1,0 +1,114 @@
+"""GAMMA priors: canonical windows, the marker CVAE, the body regressor and the pose VAE."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from motion_envs.data.build import find_sources, load_clip
+from motion_envs.data.primitives import PRIMITIVE_FRAMES, MarkerClips
+from motion_envs.data.retarget import RetargetConfig
+from motion_envs.priors.canonical import canonical_frame, to_canonical, to_world
+from motion_envs.priors.gamma import (
+    BodyRegressor,
+    MarkerCVAE,
+    MarkerCVAEConfig,
+    PoseVAE,
+    pose_vae_loss,
+    predictor_loss,
+    robust_kl,
+    to_axis_angle,
+)
+from motion_envs.body.markers import marker_ids
+
+
+@pytest.fixture(scope="module")
+def walking_clips(mocap_dir, body) -> MarkerClips:
+    source = next(s for s in find_sources(mocap_dir) if s.relative == "cmu/07_01.bvh")
+    return MarkerClips.from_motions([load_clip(source, 40, body, RetargetConfig(iterations=60))], body)
+
+
+def test_canonical_frame_round_trip_and_axes(generator):
+    joints = torch.randn(5, 22, 3, generator=generator)
+    frame = canonical_frame(joints)
+    points = torch.randn(5, 7, 3, generator=generator)
+    assert torch.allclose(to_world(to_canonical(points, frame), frame), points, atol=1e-5)
+    canonical = to_canonical(joints, frame)
+    assert torch.allclose(canonical[:, 0], torch.zeros(5, 3), atol=1e-5)  # pelvis at the origin
+    across = canonical[:, 2] - canonical[:, 1]  # right hip - left hip lies along +x
+    assert torch.allclose(across[:, 1], torch.zeros(5), atol=1e-5) and (across[:, 0] > 0).all()
+
+
+def test_windows_are_canonical_at_their_first_frame(walking_clips, body):
+    starts = walking_clips.window_starts(PRIMITIVE_FRAMES, stride=5)
+    windows = walking_clips.windows(starts, PRIMITIVE_FRAMES)
+    assert windows.markers.shape == (len(starts), PRIMITIVE_FRAMES, 67, 3)
+    assert windows.joints[:, 0, 0].abs().max() < 1e-5
+    posed = body(windows.transl, windows.global_orient, windows.body_pose)
+    assert (body.skin(posed, marker_ids()) - windows.markers).abs().max() < 1e-4
+    walked = windows.joints[:, -1, 0, 1]  # pelvis forward travel over 0.25 s of walking
+    assert walked.median() > 0.15
+
+
+def test_marker_cvae_overfits_a_few_primitives(walking_clips):
+    torch.manual_seed(0)
+    starts = walking_clips.window_starts(PRIMITIVE_FRAMES, stride=5)[:16]
+    markers = walking_clips.windows(starts, PRIMITIVE_FRAMES).markers.flatten(2)
+    model = MarkerCVAE(MarkerCVAEConfig(seed_frames=2, hidden=64, latent=16, mlp=(64, 64)))
+    optimiser = torch.optim.Adam(model.parameters(), lr=3e-3)
+    seed, future = markers[:, :2], markers[:, 2:]
+    losses = []
+    for _ in range(60):
+        optimiser.zero_grad()
+        terms = predictor_loss(seed, future, *model(seed, future))
+        terms["total"].backward()
+        optimiser.step()
+        losses.append(terms["reconstruction"].item())
+    assert losses[-1] < 0.5 * losses[0]
+    assert model.decode(seed, torch.zeros(16, 16)).shape == (16, 8, 201)
+
+
+def test_marker_cvae_rejects_wrong_shapes():
+    model = MarkerCVAE(MarkerCVAEConfig(seed_frames=1))
+    with pytest.raises(ValueError, match=r"seed must be \(B, 1, 201\)"):
+        model.decode(torch.zeros(2, 2, 201), torch.zeros(2, 128))
+    with pytest.raises(ValueError, match="seed_frames"):
+        MarkerCVAE(MarkerCVAEConfig(seed_frames=3))
+
+
+def test_robust_kl_is_zero_at_zero_and_grows_linearly():
+    values = robust_kl(torch.tensor([0.0, 1.0, 100.0]))
+    assert values[0] == 0 and abs(values[1] - (2**0.5 - 1)) < 1e-6 and abs(values[2] - 99.005) < 1e-2
+
+
+def test_body_regressor_learns_markers_to_bodies(walking_clips, body):
+    torch.manual_seed(0)
+    starts = walking_clips.window_starts(PRIMITIVE_FRAMES, stride=5)[:16]
+    windows = walking_clips.windows(starts, PRIMITIVE_FRAMES)
+    markers = windows.markers.flatten(0, 1)
+    model = BodyRegressor()
+    optimiser = torch.optim.Adam(model.parameters(), lr=1e-3)
+    errors = []
+    for _ in range(80):
+        optimiser.zero_grad()
+        params = model(markers)
+        posed = body(params["transl"], params["global_orient"], params["body_pose"])
+        error = (body.skin(posed, marker_ids()) - markers).abs().mean()
+        error.backward()
+        optimiser.step()
+        errors.append(error.item())
+    assert errors[-1] < 0.5 * errors[0]
+    assert to_axis_angle(model(markers[:2]))["body_pose"].shape == (2, 21, 3)
+
+
+def test_pose_vae_loss_falls(walking_clips):
+    torch.manual_seed(0)
+    model = PoseVAE()
+    optimiser = torch.optim.Adam(model.parameters(), lr=1e-3)
+    poses = walking_clips.body_pose[::4]
+    first = pose_vae_loss(model, poses)["reconstruction"].item()
+    for _ in range(100):
+        optimiser.zero_grad()
+        pose_vae_loss(model, poses)["total"].backward()
+        optimiser.step()
+    assert pose_vae_loss(model, poses)["reconstruction"].item() < 0.5 * first

@@ -9,8 +9,6 @@ mannequin-x's numpy `joint_transforms`.
 
 from __future__ import annotations
 
-import os
-import tempfile
 import time
 from pathlib import Path
 
@@ -24,6 +22,7 @@ import torch  # noqa: E402
 from torch.utils import benchmark  # noqa: E402
 
 from benchmarks.machine import machine_line  # noqa: E402
+from motion_envs.atomic import atomic_write  # noqa: E402
 from motion_envs.body import PARENTS, BodyModel  # noqa: E402
 from motion_envs.body.markers import foot_vertex_ids, marker_ids  # noqa: E402
 from motion_envs.data.build import build, find_sources, load_clip  # noqa: E402
@@ -137,13 +136,6 @@ def retarget_figure(mocap_dir: Path, destination: Path) -> None:
     plt.close(figure)
 
 
-def _atomic_write(path: Path, text: str) -> None:
-    handle, temporary = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
-    with os.fdopen(handle, "w") as file:
-        file.write(text)
-    os.replace(temporary, path)
-
-
 def main(mocap_dir: Path | None = None, cache_dir: Path | None = None, subsets: tuple[str, ...] = ("cmu",)) -> int:
     mocap_dir = Path(mocap_dir or default_mocap_dir() or "")
     RESULTS.mkdir(parents=True, exist_ok=True)
@@ -212,7 +204,7 @@ def main(mocap_dir: Path | None = None, cache_dir: Path | None = None, subsets: 
         "mannequin-x computes all 54 joints (hands too) in float32 numpy. Target: >= 300,000 poses/s.",
     ]
     text = "\n".join(lines) + "\n"
-    _atomic_write(RESULTS / "data_quality.md", text)
+    atomic_write(RESULTS / "data_quality.md", lambda file: file.write(text.encode()))
     retarget_figure(mocap_dir, RESULTS / "data_quality_retarget.png")
     print(text)
     return 0

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 
@@ -40,6 +41,40 @@ def _bench_data(args: argparse.Namespace) -> int:
     return data_quality(mocap_dir=args.mocap_dir, cache_dir=args.cache_dir, subsets=tuple(args.subset))
 
 
+def _train(args: argparse.Namespace) -> int:
+    if args.what != "gamma":
+        return _not_yet(f"train {args.what}")(args)
+    if args.stage != "predictor":
+        return _not_yet(f"train gamma --stage {args.stage}")(args)
+    from motion_envs.body import BodyModel
+    from motion_envs.data.build import build
+    from motion_envs.data.dataset import MotionDataset
+    from motion_envs.data.primitives import GAMMA_FPS, MarkerClips
+    from motion_envs.priors.gamma import MarkerCVAEConfig
+    from motion_envs.priors.train_gamma import PredictorTrainConfig, train_predictor
+
+    report = build(mocap_dir=args.mocap_dir, cache_dir=args.cache_dir, subsets=tuple(args.subset), fps_list=(GAMMA_FPS,))
+    dataset = MotionDataset.load(report.caches[GAMMA_FPS])
+    body = BodyModel()
+    config = PredictorTrainConfig(
+        model=MarkerCVAEConfig(seed_frames=args.seed_frames),
+        epochs=args.epochs,
+        rollout_epochs=args.rollout_epochs,
+        batch_size=args.batch_size,
+        window_stride=args.window_stride,
+        run_dir=args.run_dir or Path(f"runs/gamma_predictor_{args.seed_frames}f"),
+        weights=args.weights,
+        data_hash=report.caches[GAMMA_FPS].stem,
+        command="motion-envs " + " ".join(sys.argv[1:]),
+    )
+    entry = train_predictor(
+        config, MarkerClips.from_dataset(dataset, "train", body, mirrored=True), MarkerClips.from_dataset(dataset, "validation", body)
+    )
+    for name, errors in entry["validation_marker_error_cm_per_frame"].items():
+        print(f"validation marker error (cm) per frame, {name}: {json.dumps(errors)}")
+    return 0
+
+
 def _not_yet(what: str):
     def run(_: argparse.Namespace) -> int:
         print(f"motion-envs {what}: not available yet (it arrives with its environment)", file=sys.stderr)
@@ -71,9 +106,18 @@ def parser() -> argparse.ArgumentParser:
     _add_data_args(starts, ["cmu"])
     starts.set_defaults(run=_data_start_poses)
 
-    train = commands.add_parser("train", help="train a prior or a policy")
-    train.add_argument("what", help="gamma | wandr | clops | ppo | dqn")
-    train.set_defaults(run=_not_yet("train"))
+    train = commands.add_parser("train", help="train a prior or a policy (resumable: rerun the same command)")
+    train.add_argument("what", help="gamma | wandr | clops | ppo | dqn (gamma's predictor so far)")
+    train.add_argument("--stage", default="predictor", help="gamma: predictor | regressor | pose-vae")
+    train.add_argument("--seed-frames", type=int, default=2, choices=(1, 2))
+    train.add_argument("--epochs", type=int, default=30, help="single-primitive epochs")
+    train.add_argument("--rollout-epochs", type=int, default=5, help="8-primitive rollout epochs after those")
+    train.add_argument("--batch-size", type=int, default=128)
+    train.add_argument("--window-stride", type=int, default=2, help="frames between training windows")
+    train.add_argument("--run-dir", type=Path, default=None, help="checkpoints and tensorboard logs")
+    train.add_argument("--weights", type=Path, default=None, help="output (default: priors/weights/)")
+    _add_data_args(train, ["cmu"])
+    train.set_defaults(run=_train)
 
     bench = commands.add_parser("bench", help="run a benchmark and write benchmarks/results/*.md").add_subparsers(
         dest="name", required=True

@@ -112,3 +112,27 @@ def test_pose_vae_loss_falls(walking_clips):
         pose_vae_loss(model, poses)["total"].backward()
         optimiser.step()
     assert pose_vae_loss(model, poses)["reconstruction"].item() < 0.5 * first
+
+
+def test_predictor_training_resumes_and_writes_loadable_weights(walking_clips, tmp_path, capsys):
+    from motion_envs.priors.checkpoint import CheckpointMismatchError, load_checkpoint
+    from motion_envs.priors.train_gamma import PredictorTrainConfig, load_predictor, train_predictor
+
+    small = MarkerCVAEConfig(seed_frames=2, hidden=32, latent=8, mlp=(32, 32))
+    config = PredictorTrainConfig(model=small, epochs=3, rollout_epochs=0, rollout_primitives=2, batch_size=8,
+                                  window_stride=1, run_dir=tmp_path / "run", weights=tmp_path / "w" / "p.pt")  # fmt: skip
+    first = train_predictor(config, walking_clips, walking_clips)
+    assert first["train_loss_by_epoch"][-1] < first["train_loss_by_epoch"][0]
+    config.rollout_epochs = 1  # one more epoch, now chaining 2 primitives: resumes at epoch 3
+    second = train_predictor(config, walking_clips, walking_clips)
+    assert "resuming" in capsys.readouterr().err
+    assert second["train_loss_by_epoch"][:3] == first["train_loss_by_epoch"] and len(second["train_loss_by_epoch"]) == 4
+    errors = second["validation_marker_error_cm_per_frame"]
+    assert len(errors["primitive"]) == 8 and len(errors["rollout_2"]) == 16
+    model = load_predictor(config.weights)
+    assert model.decode(torch.zeros(1, 2, 201), torch.zeros(1, 8)).shape == (1, 8, 201)
+    assert (config.weights.parent / "manifest.json").exists()
+    with pytest.raises(CheckpointMismatchError, match="expected 'gamma_regressor'"):
+        load_checkpoint(config.weights, "gamma_regressor")
+    with pytest.raises(CheckpointMismatchError, match="config"):
+        load_checkpoint(config.run_dir / "checkpoint.pt", "gamma_predictor_run", {"seed_frames": 1})

@@ -9,9 +9,7 @@ cache (`failures`), never silently dropped.
 from __future__ import annotations
 
 import hashlib
-import os
 import sys
-import tempfile
 from dataclasses import dataclass, field
 from importlib.metadata import version
 from pathlib import Path
@@ -19,6 +17,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from motion_envs.atomic import atomic_write
 from motion_envs.body import BodyModel
 from motion_envs.data.amass import read_amass_npz
 from motion_envs.data.asf_amc import read_amc, read_asf
@@ -190,9 +189,4 @@ def _write_cache(path: Path, clips: list[tuple[ClipSource, BodyMotion]], failure
         "failures": np.array(failures, dtype=str),
         "mocap_dir": np.array(str(mocap_dir)),
     }
-    handle, temporary = tempfile.mkstemp(dir=path.parent, suffix=".npz.tmp")
-    os.close(handle)
-    with open(temporary, "wb") as file:
-        np.savez_compressed(file, **arrays)
-    os.chmod(temporary, 0o644)
-    os.replace(temporary, path)
+    atomic_write(path, lambda file: np.savez_compressed(file, **arrays))

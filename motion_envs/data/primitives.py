@@ -82,9 +82,10 @@ class MarkerClips:
 
     def window_starts(self, length: int, stride: int = 1) -> torch.Tensor:
         """(W,) first frames of every window of `length` frames lying inside one clip."""
-        starts = []
+        starts = [torch.zeros(0, dtype=torch.long)]
         for begin, end in zip(self.clip_start[:-1].tolist(), self.clip_start[1:].tolist()):
-            starts.append(torch.arange(begin, end - length + 1, stride))
+            if end - begin >= length:  # clips shorter than a window give none
+                starts.append(torch.arange(begin, end - length + 1, stride))
         return torch.cat(starts)
 
     def windows(self, starts: torch.Tensor, length: int) -> MarkerWindows:

@@ -10,14 +10,13 @@ Motion Capture Database (mocap.cs.cmu.edu; acknowledgement in
 
 from __future__ import annotations
 
-import os
-import tempfile
 from dataclasses import replace
 from importlib.resources import files
 from pathlib import Path
 
 import numpy as np
 
+from motion_envs.atomic import atomic_write
 from motion_envs.body import BodyModel
 from motion_envs.data.build import DEFAULT_FPS, build
 from motion_envs.data.canonical import canonicalise
@@ -80,13 +79,7 @@ def write_start_poses(
         for key, value in select_start_poses(MotionDataset.load(path), body).items():
             arrays[f"{fps}fps_{key}"] = value
     destination = destination or Path(str(files("motion_envs") / "assets" / "start_poses.npz"))
-    handle, temporary = tempfile.mkstemp(dir=destination.parent, suffix=".npz.tmp")
-    os.close(handle)
-    with open(temporary, "wb") as file:
-        np.savez_compressed(file, **arrays)
-    os.chmod(temporary, 0o644)
-    os.replace(temporary, destination)
-    return destination
+    return atomic_write(destination, lambda file: np.savez_compressed(file, **arrays))
 
 
 def load_start_poses(fps: int) -> dict[str, np.ndarray]:

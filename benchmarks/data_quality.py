@@ -25,7 +25,7 @@ from benchmarks.machine import machine_line  # noqa: E402
 from motion_envs.atomic import atomic_write  # noqa: E402
 from motion_envs.body import PARENTS, BodyModel  # noqa: E402
 from motion_envs.body.markers import foot_vertex_ids, marker_ids  # noqa: E402
-from motion_envs.data.build import build, find_sources, load_clip  # noqa: E402
+from motion_envs.data.build import build  # noqa: E402
 from motion_envs.data.bvh import read_bvh  # noqa: E402
 from motion_envs.data.canonical import body_tensors  # noqa: E402
 from motion_envs.data.dataset import MotionDataset  # noqa: E402
@@ -121,7 +121,8 @@ def retarget_figure(mocap_dir: Path, destination: Path) -> None:
         src = result.source_positions[frame]
         pelvis = joints[frame, 0]
         for joint, parent in enumerate(captured.skeleton.parents):
-            if parent >= 0 and "_end" not in captured.skeleton.names[joint] or joint and "Foot_end" in captured.skeleton.names[joint]:
+            name = captured.skeleton.names[joint]
+            if parent >= 0 and (not name.endswith("_end") or name.endswith("Foot_end")):  # no finger/eye tips
                 segment = src[[parent, joint]] - src[0] + pelvis
                 axis.plot(segment[:, 1] - 0.5, segment[:, 2], color="0.55", lw=2)
         for joint, parent in enumerate(PARENTS[1:], start=1):
@@ -209,5 +210,3 @@ def main(mocap_dir: Path | None = None, cache_dir: Path | None = None, subsets: 
     print(text)
     return 0
 
-
-__all__ = ["fk_throughput", "main", "find_sources", "load_clip"]

@@ -50,7 +50,6 @@ def canonicalise(motion: BodyMotion, body: BodyModel) -> BodyMotion:
         torch.as_tensor(turn) @ roma.rotvec_to_rotmat(torch.as_tensor(motion.global_orient, dtype=torch.float64))
     ).numpy()
     turned = replace(motion, transl=transl, global_orient=orient)
-    ground = lowest_foot_points(replace(turned, transl=transl[:1], global_orient=orient[:1],
-                                        body_pose=motion.body_pose[:1]), body)[0, 2]  # fmt: skip
-    transl = transl - np.array([0.0, 0.0, ground])
-    return replace(turned, transl=transl)
+    first_frame = replace(turned, transl=transl[:1], global_orient=orient[:1], body_pose=motion.body_pose[:1])
+    ground = lowest_foot_points(first_frame, body)[0, 2]
+    return replace(turned, transl=transl - np.array([0.0, 0.0, ground]))

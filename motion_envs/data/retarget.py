@@ -85,9 +85,11 @@ def retarget(
     rest = source.skeleton.rest_positions() @ to_z.T
     body_rest = body.rest_joints.double().numpy()
 
+    ankles = [JOINT_NAMES.index("left_ankle"), JOINT_NAMES.index("right_ankle")]
+
     def height(points: np.ndarray, joint_ids: np.ndarray) -> float:
-        head, ankles = joint_ids[JOINT_NAMES.index("head")], joint_ids[[7, 8]]
-        return float(points[head, 2] - points[ankles, 2].mean())
+        """Rest height: head joint above the mean ankle."""
+        return float(points[joint_ids[JOINT_NAMES.index("head")], 2] - points[joint_ids[ankles], 2].mean())
 
     scale = height(body_rest, np.arange(22)) / height(rest, src)
     positions = positions * scale

@@ -13,19 +13,20 @@ from dataclasses import dataclass
 
 from motion_envs.body.skeleton import JOINT_NAMES
 
+
 @dataclass(frozen=True)
 class SkeletonMap:
     """How one source skeleton drives the body.
 
     name: shown in reports. joints: body joint name -> source joint name or None.
     leading_frames_to_skip: frames the converter prepended (e.g. a T-pose).
-    up_axis: the source's up axis ("y"; sources face +Z at rest).
+    Sources are Y up and face +Z at rest, as both known skeletons do
+    (retargeting lifts them with `Y_UP_TO_Z_UP`).
     """
 
     name: str
     joints: dict[str, str | None]
     leading_frames_to_skip: int = 0
-    up_axis: str = "y"
 
     def __post_init__(self) -> None:
         if tuple(self.joints) != JOINT_NAMES:
@@ -35,6 +36,7 @@ class SkeletonMap:
 
     def source_names(self) -> set[str]:
         return {name for name in self.joints.values() if name is not None}
+
 
 CMU_DAZ_BVH = SkeletonMap(
     name="CMU cgspeed Daz-friendly BVH",

@@ -16,8 +16,3 @@ Y_UP_TO_Z_UP = np.array([[-1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 1.0, 0.0]], dt
 
 MANNEQUIN_TO_WORLD = Y_UP_TO_Z_UP
 """world = MANNEQUIN_TO_WORLD @ mannequin (also used for Y-up mocap, which shares the axes)."""
-
-WORLD_UP = np.array([0.0, 0.0, 1.0])
-WORLD_FORWARD = np.array([0.0, 1.0, 0.0])
-"""Facing direction of the rest body (global_orient = 0)."""
-WORLD_RIGHT = np.array([1.0, 0.0, 0.0])

@@ -55,7 +55,6 @@ class SourceMotion:
     root_positions: np.ndarray
     local_rotations: np.ndarray
     metres_per_unit: float
-    first_frame: int = 0
 
     @property
     def num_frames(self) -> int:
@@ -81,7 +80,6 @@ class SourceMotion:
             self,
             root_positions=self.root_positions[start:stop],
             local_rotations=self.local_rotations[start:stop],
-            first_frame=self.first_frame + start,
         )
 
 
@@ -103,7 +101,3 @@ class BodyMotion:
     @property
     def num_frames(self) -> int:
         return int(self.transl.shape[0])
-
-    @property
-    def seconds(self) -> float:
-        return self.num_frames / self.fps

@@ -19,7 +19,7 @@ Losses are pure functions below (`predictor_loss`, `robust_kl`, ...).
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import torch
 from torch import nn
@@ -235,8 +235,3 @@ def pose_vae_loss(model: PoseVAE, body_pose: torch.Tensor, kl_weight: float = 5e
     }
     terms["total"] = terms["reconstruction"] + kl_weight * terms["kl"]
     return terms
-
-
-def config_dict(config: object) -> dict:
-    """A frozen config as a plain dict (what checkpoints store)."""
-    return asdict(config)

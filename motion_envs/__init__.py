@@ -10,8 +10,13 @@ import gymnasium as gym
 
 __version__ = "0.1.0"
 
-ENV_SPECS: dict[str, str] = {}
-"""Environment id -> entry point. Each environment's issue adds its line here."""
+ENV_SPECS: dict[str, tuple[str, str]] = {
+    "motion_envs/GammaReach-v0": (
+        "motion_envs.envs.gamma_reach:GammaReachEnv",
+        "motion_envs.envs.gamma_reach:GammaReachVectorEnv",
+    ),
+}
+"""Environment id -> (entry point, native vector entry point)."""
 
 
 def register_envs() -> list[str]:
@@ -20,9 +25,9 @@ def register_envs() -> list[str]:
     Returns:
         The ids registered by motion_envs.
     """
-    for env_id, entry_point in ENV_SPECS.items():
+    for env_id, (entry_point, vector_entry_point) in ENV_SPECS.items():
         if env_id not in gym.registry:
-            gym.register(id=env_id, entry_point=entry_point)
+            gym.register(id=env_id, entry_point=entry_point, vector_entry_point=vector_entry_point)
     return sorted(ENV_SPECS)
 
 

@@ -41,38 +41,77 @@ def _bench_data(args: argparse.Namespace) -> int:
     return data_quality(mocap_dir=args.mocap_dir, cache_dir=args.cache_dir, subsets=tuple(args.subset))
 
 
+def _bench_gamma(args: argparse.Namespace) -> int:
+    from benchmarks.gamma_control import main as gamma_control
+
+    return gamma_control(pairs=args.pairs, clones=args.clones, candidates=args.candidates, seed=args.seed, quick=args.quick)
+
+
+def _bench_gamma_realism(args: argparse.Namespace) -> int:
+    from benchmarks.gamma_realism import main as gamma_realism
+
+    return gamma_realism(mocap_dir=args.mocap_dir, cache_dir=args.cache_dir, subsets=tuple(args.subset),
+                         rollouts=args.rollouts, primitives=args.primitives, seed=args.seed)  # fmt: skip
+
+
 def _train(args: argparse.Namespace) -> int:
     if args.what != "gamma":
         return _not_yet(f"train {args.what}")(args)
-    if args.stage != "predictor":
-        return _not_yet(f"train gamma --stage {args.stage}")(args)
-    from motion_envs.body import BodyModel
+    stages = {"predictor": _train_gamma_predictor, "regressor": _train_gamma_regressor, "pose-vae": _train_gamma_pose_vae}
+    if args.stage not in stages:
+        print(f"unknown --stage {args.stage!r}; choose from {', '.join(stages)}", file=sys.stderr)
+        return 2
     from motion_envs.data.build import build
     from motion_envs.data.dataset import MotionDataset
-    from motion_envs.data.primitives import GAMMA_FPS, MarkerClips
-    from motion_envs.priors.gamma import MarkerCVAEConfig
-    from motion_envs.priors.train_gamma import PredictorTrainConfig, train_predictor
+    from motion_envs.data.primitives import GAMMA_FPS
 
     report = build(mocap_dir=args.mocap_dir, cache_dir=args.cache_dir, subsets=tuple(args.subset), fps_list=(GAMMA_FPS,))
     dataset = MotionDataset.load(report.caches[GAMMA_FPS])
-    body = BodyModel()
-    config = PredictorTrainConfig(
-        model=MarkerCVAEConfig(seed_frames=args.seed_frames),
-        epochs=args.epochs,
-        rollout_epochs=args.rollout_epochs,
-        batch_size=args.batch_size,
-        window_stride=args.window_stride,
-        run_dir=args.run_dir or Path(f"runs/gamma_predictor_{args.seed_frames}f"),
-        weights=args.weights,
-        data_hash=report.caches[GAMMA_FPS].stem,
-        command="motion-envs " + " ".join(sys.argv[1:]),
-    )
-    entry = train_predictor(
-        config, MarkerClips.from_dataset(dataset, "train", body, mirrored=True), MarkerClips.from_dataset(dataset, "validation", body)
-    )
-    for name, errors in entry["validation_marker_error_cm_per_frame"].items():
-        print(f"validation marker error (cm) per frame, {name}: {json.dumps(errors)}")
+    chosen = {"epochs": args.epochs, "batch_size": args.batch_size, "run_dir": args.run_dir, "weights": args.weights}
+    common = {"data_hash": report.caches[GAMMA_FPS].stem, "command": "motion-envs " + " ".join(sys.argv[1:]),
+              **{name: value for name, value in chosen.items() if value is not None}}  # fmt: skip
+    entry = stages[args.stage](args, dataset, common)
+    for name, value in entry.items():
+        if name.startswith("validation"):
+            print(f"{name}: {json.dumps(value)}")
     return 0
+
+
+def _marker_clips(dataset, split: str, mirrored: bool = False):
+    from motion_envs.body import BodyModel
+    from motion_envs.data.primitives import MarkerClips
+
+    return MarkerClips.from_dataset(dataset, split, BodyModel(), mirrored=mirrored)
+
+
+def _train_gamma_predictor(args: argparse.Namespace, dataset, common: dict) -> dict:
+    from motion_envs.priors.gamma import MarkerCVAEConfig
+    from motion_envs.priors.train_gamma import PredictorTrainConfig, train_predictor
+
+    common.setdefault("run_dir", Path(f"runs/gamma_predictor_{args.seed_frames}f"))
+    config = PredictorTrainConfig(model=MarkerCVAEConfig(seed_frames=args.seed_frames), rollout_epochs=args.rollout_epochs,
+                                  window_stride=args.window_stride, **common)  # fmt: skip
+    return train_predictor(config, _marker_clips(dataset, "train", mirrored=True), _marker_clips(dataset, "validation"))
+
+
+def _train_gamma_regressor(args: argparse.Namespace, dataset, common: dict) -> dict:
+    from motion_envs.priors.train_regressor import RegressorTrainConfig, train_regressor
+
+    config = RegressorTrainConfig(window_stride=args.window_stride, **common)
+    return train_regressor(config, _marker_clips(dataset, "train", mirrored=True), _marker_clips(dataset, "validation"))
+
+
+def _train_gamma_pose_vae(args: argparse.Namespace, dataset, common: dict) -> dict:
+    import numpy as np
+    import torch
+
+    from motion_envs.priors.train_pose_prior import PoseVAETrainConfig, train_pose_vae
+
+    def poses(split: str, mirrored: bool) -> torch.Tensor:
+        clips = dataset.clips(split, mirrored=mirrored)
+        return torch.as_tensor(np.concatenate([clip.body_pose for clip in clips]), dtype=torch.float32)
+
+    return train_pose_vae(PoseVAETrainConfig(**common), poses("train", True), poses("validation", False))
 
 
 def _not_yet(what: str):
@@ -107,12 +146,12 @@ def parser() -> argparse.ArgumentParser:
     starts.set_defaults(run=_data_start_poses)
 
     train = commands.add_parser("train", help="train a prior or a policy (resumable: rerun the same command)")
-    train.add_argument("what", help="gamma | wandr | clops | ppo | dqn (gamma's predictor so far)")
+    train.add_argument("what", help="gamma | wandr | clops | ppo | dqn (gamma so far)")
     train.add_argument("--stage", default="predictor", help="gamma: predictor | regressor | pose-vae")
-    train.add_argument("--seed-frames", type=int, default=2, choices=(1, 2))
-    train.add_argument("--epochs", type=int, default=30, help="single-primitive epochs")
-    train.add_argument("--rollout-epochs", type=int, default=5, help="8-primitive rollout epochs after those")
-    train.add_argument("--batch-size", type=int, default=128)
+    train.add_argument("--seed-frames", type=int, default=2, choices=(1, 2), help="predictor: seed frames")
+    train.add_argument("--epochs", type=int, default=None, help="epochs (predictor: single-primitive epochs)")
+    train.add_argument("--rollout-epochs", type=int, default=5, help="predictor: 8-primitive rollout epochs after those")
+    train.add_argument("--batch-size", type=int, default=None, help="default: the stage's own")
     train.add_argument("--window-stride", type=int, default=2, help="frames between training windows")
     train.add_argument("--run-dir", type=Path, default=None, help="checkpoints and tensorboard logs")
     train.add_argument("--weights", type=Path, default=None, help="output (default: priors/weights/)")
@@ -125,6 +164,19 @@ def parser() -> argparse.ArgumentParser:
     bench_data = bench.add_parser("data", help="data quality: clips, retarget error, foot skating, FK speed")
     _add_data_args(bench_data, ["cmu"])
     bench_data.set_defaults(run=_bench_data)
+    bench_gamma = bench.add_parser("gamma", help="GAMMA goal reaching (Table 1 protocol) with the shipped weights")
+    bench_gamma.add_argument("--quick", action="store_true", help="20 pairs x 4 clones, best-of-8: a few minutes")
+    bench_gamma.add_argument("--pairs", type=int, default=100)
+    bench_gamma.add_argument("--clones", type=int, default=32)
+    bench_gamma.add_argument("--candidates", type=int, default=16, help="latents tried per step by the greedy row")
+    bench_gamma.add_argument("--seed", type=int, default=0)
+    bench_gamma.set_defaults(run=_bench_gamma)
+    realism = bench.add_parser("gamma-realism", help="random-latent GAMMA motion vs the data: contact score, FS")
+    _add_data_args(realism, ["cmu"])
+    realism.add_argument("--rollouts", type=int, default=10, help="rollouts per shipped start pose")
+    realism.add_argument("--primitives", type=int, default=20)
+    realism.add_argument("--seed", type=int, default=0)
+    realism.set_defaults(run=_bench_gamma_realism)
 
     play = commands.add_parser("play", help="watch a policy or prior in an environment")
     play.add_argument("env_id", nargs="?")

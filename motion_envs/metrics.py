@@ -26,3 +26,33 @@ def foot_skating(feet: torch.Tensor, threshold: float = WANDR_SKATING_THRESHOLD)
     now = torch.gather(feet[..., :-1, :, :2], -2, index)
     then = torch.gather(feet[..., 1:, :, :2], -2, index)
     return (then - now).norm(dim=-1).squeeze(-1) > threshold
+
+
+def marker_speeds(markers: torch.Tensor, fps: float, central: bool = False) -> torch.Tensor:
+    """(N, T, M, 3) -> marker speeds (m/s): (N, T - 1, M) forward or (N, T - 2, M) central differences."""
+    if central:
+        return (markers[:, 2:] - markers[:, :-2]).norm(dim=-1) * fps / 2.0
+    return (markers[:, 1:] - markers[:, :-1]).norm(dim=-1) * fps
+
+
+CONTACT_HEIGHT = 0.05
+CONTACT_SPEED = 0.075
+"""GAMMA Eq. 11 thresholds: 5 cm above the ground, 7.5 cm/s."""
+
+
+def contact_score(markers: torch.Tensor, fps: float) -> torch.Tensor:
+    """GAMMA's contact score (Eq. 11) of each primitive.
+
+    s = exp(-(min |Y_z| - 0.05)+) · exp(-(min |Y_vel| - 0.075)+), minima over
+    the primitive's frames and markers; speeds by forward difference.
+
+    Args:
+        markers: (N, T, M, 3) markers of N primitives, ground at z = 0.
+        fps: frame rate of the markers.
+
+    Returns:
+        (N,) scores in (0, 1], higher is better.
+    """
+    lowest = markers[..., 2].abs().amin(dim=(1, 2))
+    slowest = marker_speeds(markers, fps).amin(dim=(1, 2))
+    return torch.exp(-(lowest - CONTACT_HEIGHT).clamp_min(0.0)) * torch.exp(-(slowest - CONTACT_SPEED).clamp_min(0.0))

@@ -20,6 +20,7 @@ from motion_envs.priors.gamma import (
     to_axis_angle,
 )
 from motion_envs.body.markers import marker_ids
+from motion_envs.priors.train_regressor import regressor_loss
 
 
 @pytest.fixture(scope="module")
@@ -91,12 +92,10 @@ def test_body_regressor_learns_markers_to_bodies(walking_clips, body):
     errors = []
     for _ in range(80):
         optimiser.zero_grad()
-        params = model(markers)
-        posed = body(params["transl"], params["global_orient"], params["body_pose"])
-        error = (body.skin(posed, marker_ids()) - markers).abs().mean()
-        error.backward()
+        terms = regressor_loss(model, body, markers, pose_weight=1e-3)
+        terms["total"].backward()
         optimiser.step()
-        errors.append(error.item())
+        errors.append(terms["marker_error"].item())
     assert errors[-1] < 0.5 * errors[0]
     assert to_axis_angle(model(markers[:2]))["body_pose"].shape == (2, 21, 3)
 
@@ -136,3 +135,31 @@ def test_predictor_training_resumes_and_writes_loadable_weights(walking_clips, t
         load_checkpoint(config.weights, "gamma_regressor")
     with pytest.raises(CheckpointMismatchError, match="config"):
         load_checkpoint(config.run_dir / "checkpoint.pt", "gamma_predictor_run", {"seed_frames": 1})
+
+
+def test_regressor_and_pose_vae_training_runs_write_loadable_weights(walking_clips, tmp_path, capsys):
+    from motion_envs.priors.gamma import BodyRegressorConfig, PoseVAEConfig
+    from motion_envs.priors.train_pose_prior import PoseVAETrainConfig, load_pose_vae, train_pose_vae, validate_pose_vae
+    from motion_envs.priors.train_regressor import RegressorTrainConfig, load_regressor, train_regressor
+
+    config = RegressorTrainConfig(model=BodyRegressorConfig(hidden=32, blocks=2), epochs=3, batch_size=4,
+                                  learning_rate=1e-3, window_stride=10, run_dir=tmp_path / "r", weights=tmp_path / "w" / "r.pt")  # fmt: skip
+    entry = train_regressor(config, walking_clips, walking_clips)
+    assert entry["train_loss_by_epoch"][-1] < entry["train_loss_by_epoch"][0]
+    assert entry["validation"]["marker_error_cm"] > 0
+    config.epochs = 4  # resumes at epoch 3
+    assert len(train_regressor(config, walking_clips, walking_clips)["train_loss_by_epoch"]) == 4
+    assert "resuming" in capsys.readouterr().err
+    assert load_regressor(config.weights)(torch.zeros(2, 67, 3))["body_pose"].shape == (2, 21, 6)
+
+    poses = walking_clips.body_pose
+    vae = PoseVAETrainConfig(model=PoseVAEConfig(hidden=32, latent=4), epochs=3, batch_size=64, run_dir=tmp_path / "v",
+                             weights=tmp_path / "w" / "v.pt")  # fmt: skip
+    torch.manual_seed(vae.seed)
+    untrained = validate_pose_vae(PoseVAE(vae.model), poses)["joint_angle_error_deg"]
+    entry = train_pose_vae(vae, poses, poses)
+    assert entry["train_loss_by_epoch"][-1] < entry["train_loss_by_epoch"][0]
+    assert 0 < entry["validation"]["joint_angle_error_deg"] < untrained
+    assert load_pose_vae(vae.weights).encode(poses[:3])[0].shape == (3, 4)
+    manifest = (tmp_path / "w" / "manifest.json").read_text()
+    assert '"r.pt"' in manifest and '"v.pt"' in manifest

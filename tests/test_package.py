@@ -19,9 +19,11 @@ def test_register_envs_is_idempotent_and_registers_every_listed_id():
     assert after == before == set(motion_envs.ENV_SPECS)
 
 
-def test_no_env_is_registered_before_the_first_env_lands():
-    assert motion_envs.ENV_SPECS == {}
-    assert not [k for k in gym.registry if k.startswith("motion_envs/")]
+def test_every_env_has_a_native_vector_entry_point():
+    assert "motion_envs/GammaReach-v0" in motion_envs.ENV_SPECS
+    for env_id in motion_envs.ENV_SPECS:
+        spec = gym.spec(env_id)
+        assert spec.vector_entry_point is not None and spec.vector_entry_point.startswith("motion_envs.envs.")
 
 
 def test_cli_help_lists_the_subcommands():

@@ -191,11 +191,14 @@ class BodyModel(nn.Module):
         Returns:
             (..., V, 3) world vertex positions.
         """
+        return self.skin_with_rows(pose, self.skin_rows(vertex_ids))
+
+    def skin_with_rows(self, pose: BodyPose, reading: torch.Tensor) -> torch.Tensor:
+        """`skin` with the (V, 67) matrix of `skin_rows` computed once by the caller -> (..., V, 3)."""
         rows = pose.frame_rows
         size = rows.shape[1] // 3
-        reading = self.skin_rows(vertex_ids).to(rows.dtype)
-        vertices = (reading @ rows).reshape(len(vertex_ids), size, 3).transpose(0, 1)
-        return vertices.reshape(*pose.joints.shape[:-2], len(vertex_ids), 3)
+        vertices = (reading.to(rows.dtype) @ rows).reshape(len(reading), size, 3).transpose(0, 1)
+        return vertices.reshape(*pose.joints.shape[:-2], len(reading), 3)
 
     def skin_rows(self, vertex_ids: torch.Tensor) -> torch.Tensor:
         """(V, 67) matrix taking `BodyPose.frame_rows` to vertex positions."""

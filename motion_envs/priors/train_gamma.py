@@ -9,25 +9,16 @@ minutes and after every epoch; rerunning the same command resumes.
 
 from __future__ import annotations
 
-import json
-import random
-import sys
-import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-import numpy as np
 import torch
-from torch.utils.tensorboard import SummaryWriter
-from tqdm import tqdm
 
-from motion_envs.atomic import atomic_write
 from motion_envs.data.primitives import PRIMITIVE_FRAMES, MarkerClips, MarkerWindows
 from motion_envs.priors.canonical import canonical_frame, to_canonical, to_world
-from motion_envs.priors.checkpoint import load_checkpoint, save_checkpoint
 from motion_envs.priors.gamma import MarkerCVAE, MarkerCVAEConfig, predictor_loss
+from motion_envs.priors.training import WEIGHTS_DIR, FitSettings, fit, load_shipped, minibatches, seed_everything, ship
 
-WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
 PREDICTOR_KIND = "gamma_predictor"
 
 
@@ -87,11 +78,6 @@ def rollout_loss(
     return total
 
 
-def _batches(starts: torch.Tensor, batch_size: int, generator: torch.Generator) -> list[torch.Tensor]:
-    order = starts[torch.randperm(len(starts), generator=generator)]
-    return [order[i : i + batch_size] for i in range(0, len(order) - batch_size + 1, batch_size)] or [order]
-
-
 @torch.no_grad()
 def validate(model: MarkerCVAE, clips: MarkerClips, primitives: int, max_windows: int = 512) -> dict[str, list[float]]:
     """Per-frame marker error (cm) of one primitive and of a `primitives`-long rollout, posterior mean z."""
@@ -111,58 +97,28 @@ def validate(model: MarkerCVAE, clips: MarkerClips, primitives: int, max_windows
 
 def train_predictor(config: PredictorTrainConfig, train: MarkerClips, validation: MarkerClips) -> dict:
     """Train (or resume) a marker predictor; returns the manifest entry it writes."""
-    torch.manual_seed(config.seed)
-    random.seed(config.seed)
-    np.random.seed(config.seed)
+    seed_everything(config.seed)
     model = MarkerCVAE(config.model)
     optimiser = torch.optim.Adam(model.parameters(), lr=config.learning_rate)
-    checkpoint_path = config.run_dir / "checkpoint.pt"
-    start_epoch = 0
-    history: list[float] = []
-    if checkpoint_path.exists():
-        state = load_checkpoint(checkpoint_path, PREDICTOR_KIND + "_run", asdict(config.model))
-        model.load_state_dict(state["model"])
-        optimiser.load_state_dict(state["optimiser"])
-        start_epoch = state["epoch"]
-        history = list(state["history"])
-        print(f"resuming {checkpoint_path} at epoch {start_epoch}", file=sys.stderr)
-    writer = SummaryWriter(str(config.run_dir / "tensorboard"))
-    generator = torch.Generator().manual_seed(config.seed + start_epoch)
-    total_epochs = config.epochs + config.rollout_epochs
-    last_save = time.monotonic()
+    settings = FitSettings(PREDICTOR_KIND, config.run_dir, config.epochs + config.rollout_epochs, config.seed,
+                           config.checkpoint_minutes)  # fmt: skip
 
-    def save(epoch: int) -> None:
-        save_checkpoint(checkpoint_path, {"kind": PREDICTOR_KIND + "_run", "config": asdict(config.model),
-                                          "model": model.state_dict(), "optimiser": optimiser.state_dict(),
-                                          "epoch": epoch, "history": history[:epoch]})  # fmt: skip
+    def rollout(epoch: int) -> bool:
+        return epoch >= config.epochs
 
-    for epoch in range(start_epoch, total_epochs):
-        rollout = epoch >= config.epochs
-        length = config.rollout_frames() if rollout else PRIMITIVE_FRAMES
-        primitives = config.rollout_primitives if rollout else 1
-        batches = _batches(train.window_starts(length, config.window_stride), config.batch_size, generator)
-        sums: dict[str, float] = {}
-        progress = tqdm(batches, desc=f"epoch {epoch + 1}/{total_epochs}{' rollout' if rollout else ''}", leave=False)
-        for starts in progress:
-            optimiser.zero_grad()
-            terms = rollout_loss(model, train.windows(starts, length), primitives)
-            terms["total"].backward()
-            optimiser.step()
-            for name in ("total", "reconstruction", "difference", "kl"):
-                sums[name] = sums.get(name, 0.0) + float(terms[name].detach()) / len(batches)
-            progress.set_postfix(loss=f"{terms['total'].item():.4f}")
-            if time.monotonic() - last_save > 60 * config.checkpoint_minutes:
-                save(epoch)  # mid-epoch: the epoch restarts on resume
-                last_save = time.monotonic()
-        for name, value in sums.items():
-            writer.add_scalar(f"train/{name}", value, epoch)
-        history.append(sums["total"])
-        save(epoch + 1)
-        last_save = time.monotonic()
-    writer.close()
+    def window_length(epoch: int) -> int:
+        return config.rollout_frames() if rollout(epoch) else PRIMITIVE_FRAMES
 
-    figures = validate(model, validation, config.rollout_primitives)
-    weights = config.weights or WEIGHTS_DIR / f"gamma_predictor_{config.model.seed_frames}f.pt"
+    def epoch_batches(epoch: int, generator: torch.Generator) -> list[torch.Tensor]:
+        starts = train.window_starts(window_length(epoch), config.window_stride)
+        return minibatches(starts, config.batch_size, generator)
+
+    def loss_terms(epoch: int, starts: torch.Tensor) -> dict[str, torch.Tensor]:
+        primitives = config.rollout_primitives if rollout(epoch) else 1
+        terms = rollout_loss(model, train.windows(starts, window_length(epoch)), primitives)
+        return {name: value for name, value in terms.items() if name != "frame_error"}
+
+    history = fit(model, optimiser, settings, epoch_batches, loss_terms, lambda e: "rollout" if rollout(e) else "")
     entry = {
         "kind": PREDICTOR_KIND,
         "config": asdict(config.model),
@@ -171,26 +127,11 @@ def train_predictor(config: PredictorTrainConfig, train: MarkerClips, validation
         "epochs": config.epochs,
         "rollout_epochs": config.rollout_epochs,
         "train_loss_by_epoch": [round(v, 5) for v in history],
-        "validation_marker_error_cm_per_frame": figures,
-        "torch": str(torch.__version__),
+        "validation_marker_error_cm_per_frame": validate(model, validation, config.rollout_primitives),
     }
-    half = {name: value.half() for name, value in model.state_dict().items()}  # halves the shipped size
-    save_checkpoint(weights, {**entry, "model": half})
-    _update_manifest(weights, entry)
-    return entry
+    return ship(model, config.weights or WEIGHTS_DIR / f"gamma_predictor_{config.model.seed_frames}f.pt", entry)
 
 
 def load_predictor(path: str | Path) -> MarkerCVAE:
-    """A trained predictor from shipped weights (float16 on disk, float32 in memory)."""
-    state = load_checkpoint(path, PREDICTOR_KIND)
-    model = MarkerCVAE(MarkerCVAEConfig(**state["config"]))
-    model.load_state_dict({name: value.float() for name, value in state["model"].items()})
-    return model.eval()
-
-
-def _update_manifest(weights: Path, entry: dict) -> None:
-    manifest_path = weights.parent / "manifest.json"
-    manifest = json.loads(manifest_path.read_text()) if manifest_path.exists() else {}
-    manifest[weights.name] = {k: v for k, v in entry.items() if k != "model"}
-    text = json.dumps(manifest, indent=2) + "\n"
-    atomic_write(manifest_path, lambda file: file.write(text.encode()))
+    """A trained predictor from shipped weights."""
+    return load_shipped(path, PREDICTOR_KIND, lambda config: MarkerCVAE(MarkerCVAEConfig(**config)))

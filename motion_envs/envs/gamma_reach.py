@@ -1,0 +1,351 @@
+"""GammaReach-v0: steer a GAMMA body to a goal on the ground by choosing its latent codes.
+
+## Description
+
+GAMMA (Zhang & Tang, CVPR 2022) turns a latent code z into a 0.25 s motion
+primitive of a human body. Here a body stands in the middle of a 20 × 20 m
+ground and a goal lies somewhere on it; every step the agent picks z, the
+prior generates the next primitive (10 frames at 40 fps: 1 or 2 seed frames
+from the previous one, 9 or 8 new), and the body moves.
+
+## Action Space
+
+`Box(-4, 4, (128,), float32)`: the marker predictor's latent z, unscaled
+(the prior is N(0, I), so the box holds all but 6e-5 of its mass per
+coordinate). Actions outside the box are clipped to it; a wrong shape or a
+NaN/inf raises `ValueError`.
+
+## Observation Space
+
+`Box(-inf, inf, (804,), float32)`: the paper's state (Eq. 3) for the next
+primitive, in its canonical frame (origin: pelvis of the first seed frame,
+x: left-to-right hip, z: up): for each of 2 seed frames, 67 markers (x, y, z)
+then 67 unit vectors from each marker to the goal (which lies on the
+ground), i.e. `(2, 67, 6)` flattened. At an episode's start the seed is one
+frame; it fills both slots.
+
+## Rewards
+
+GAMMA's Eq. 4 with the terms of `motion_envs.rewards` (each in [0, 1]),
+weights from `RewardConfig` (`reward="paper"` default, or `"release"`, the
+authors' code). Every term is in `info["reward_terms"]`. With
+`terminate_on_goal` (default) a successful step also earns the remaining
+primitives at the best per-step reward (`goal_absorbing`; see
+`motion_envs.rewards`).
+
+## Starting State
+
+A start window from the validation data (`motion_envs/assets/start_poses.npz`,
+standing or walking, `start_kind`), its last frame placed with the pelvis
+over the centre, facing a uniformly random direction. The goal is uniform on
+the ground, at least `min_goal_distance` from the start.
+
+## Episode End
+
+Success: the pelvis (last frame of a primitive) within `goal_radius` (0.75 m)
+of the goal on the ground; the episode terminates there when
+`terminate_on_goal`. Truncation after `max_primitives` (60) primitives.
+
+## Arguments
+
+`gym.make("motion_envs/GammaReach-v0", **kwargs)` with any field of
+`GammaReachConfig`; `reward` may be "paper", "release" or a `RewardConfig`.
+`reset(options=...)` takes `goal` ((x, y) metres), `start_index` (row of the
+start poses) and `facing` (radians).
+
+## Batched core and state
+
+`GammaReachCore` steps N bodies at once (the single env is N = 1; the
+vector env is N = num_envs). The whole simulation state is one
+`GammaReachState` (`motion_envs.batched.BatchedState`): `env.state` can be
+cloned, indexed, repeated and assigned back, which the tree search uses.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import roma
+import torch
+from gymnasium.vector import AutoresetMode, VectorEnv
+
+from motion_envs.batched import BatchedState
+from motion_envs.data.primitives import GAMMA_FPS
+from motion_envs.data.start_poses import load_start_poses
+from motion_envs.envs.core import check_actions, config_from_kwargs
+from motion_envs.metrics import contact_score, marker_speeds
+from motion_envs.priors.canonical import PELVIS, canonical_frame, to_canonical
+from motion_envs.priors.gamma_generator import GammaGenerator, GammaSeed, Primitive
+from motion_envs.rewards import (
+    RewardConfig,
+    contact_reward,
+    goal_absorbing_reward,
+    goal_reward,
+    orientation_reward,
+    path_reward,
+    pose_prior_reward,
+)
+
+OBSERVATION_SIZE = 2 * 67 * 6
+START_KINDS = ("any", "standing", "walking")
+
+
+@dataclasses.dataclass(frozen=True)
+class GammaReachConfig:
+    """Everything that defines a GammaReach task (defaults: the paper's)."""
+
+    reward: RewardConfig = dataclasses.field(default_factory=RewardConfig.paper)
+    area: float = 20.0
+    """Side of the square ground (m), centred on the start; goals are uniform on it."""
+    goal_radius: float = 0.75
+    min_goal_distance: float = 0.75
+    max_primitives: int = 60
+    start_kind: str = "any"
+    latent_bound: float = 4.0
+    terminate_on_goal: bool = True
+    weights_dir: str | None = None
+    """Folder with the GAMMA weights (default: the shipped ones)."""
+    device: str = "cpu"
+
+    def __post_init__(self) -> None:
+        if isinstance(self.reward, str):
+            object.__setattr__(self, "reward", RewardConfig.named(self.reward))
+        if self.start_kind not in START_KINDS:
+            raise ValueError(f"start_kind must be one of {START_KINDS}, got {self.start_kind!r}")
+        if self.max_primitives < 1 or self.area <= 0 or self.goal_radius <= 0 or self.latent_bound <= 0:
+            raise ValueError("max_primitives, area, goal_radius and latent_bound must be positive")
+
+
+@dataclasses.dataclass(frozen=True)
+class GammaReachState(BatchedState):
+    """N bodies' simulation state. goal: (N, 3) on the ground. steps: (N,) primitives so far.
+    closest: (N,) closest pelvis-goal ground distance so far (m)."""
+
+    seed: GammaSeed
+    goal: torch.Tensor
+    steps: torch.Tensor
+    closest: torch.Tensor
+
+
+@dataclasses.dataclass(frozen=True)
+class GammaStepResult:
+    """What one step of N bodies produced; every tensor (N,) unless noted."""
+
+    reward: torch.Tensor
+    terms: dict[str, torch.Tensor]
+    distance: torch.Tensor
+    reached: torch.Tensor
+    terminated: torch.Tensor
+    truncated: torch.Tensor
+    contact_score: torch.Tensor
+    primitive: Primitive
+
+
+class GammaReachCore:
+    """The batched task: start states, one step for N bodies, observations. Stateless: states go in and out."""
+
+    def __init__(self, config: GammaReachConfig, generator: GammaGenerator | None = None) -> None:
+        self.config = config
+        self.device = torch.device(config.device)
+        loaded = generator or (GammaGenerator.load(config.weights_dir) if config.weights_dir else GammaGenerator.load())
+        self.generator = loaded.to(self.device)
+        starts = load_start_poses(GAMMA_FPS)
+        keep = np.ones(len(starts["kind"]), dtype=bool) if config.start_kind == "any" else starts["kind"] == config.start_kind
+        self.start_rows = np.flatnonzero(keep)
+
+        def last_frame(name: str) -> torch.Tensor:
+            return torch.as_tensor(starts[name][:, -1], dtype=torch.float32, device=self.device)
+
+        self.start_transl, self.start_orient, self.start_pose = last_frame("transl"), last_frame("global_orient"), last_frame("body_pose")
+
+    @property
+    def num_starts(self) -> int:
+        return len(self.start_transl)
+
+    def initial_state(self, start_index: torch.Tensor, facing: torch.Tensor, goal_xy: torch.Tensor) -> GammaReachState:
+        """Bodies from start rows (N,) turned to `facing` (N,) radians about the pelvis, pelvis over (0, 0);
+        goals (N, 2) on the ground."""
+        start_index, facing, goal_xy = (value.to(self.device) for value in (start_index, facing, goal_xy))
+        if (start_index < 0).any() or (start_index >= self.num_starts).any():
+            raise ValueError(f"start_index must lie in [0, {self.num_starts}), got {start_index.tolist()}")
+        turn = roma.rotvec_to_rotmat(torch.stack([torch.zeros_like(facing), torch.zeros_like(facing), facing], -1))
+        orient = roma.rotmat_to_rotvec(turn @ roma.rotvec_to_rotmat(self.start_orient[start_index]))
+        transl = self.start_transl[start_index] * torch.tensor([0.0, 0.0, 1.0], device=self.device)
+        seed = self.generator.seed_from_bodies(transl, orient, self.start_pose[start_index])
+        count = len(start_index)
+        goal = torch.cat([goal_xy.to(torch.float32), torch.zeros(count, 1, device=self.device)], dim=1)
+        distance = (goal_xy - transl[:, :2]).norm(dim=-1)
+        return GammaReachState(seed, goal, torch.zeros(count, dtype=torch.long, device=self.device), distance)
+
+    def sample_initial_state(self, rngs: list[np.random.Generator], options: dict[str, Any] | None = None) -> GammaReachState:
+        """One random start per generator (the single env has one; the vector env one per body).
+
+        `options` may fix `goal` ((x, y)), `start_index` and `facing` for every body."""
+        options = dict(options or {})
+        unknown = set(options) - {"goal", "start_index", "facing"}
+        if unknown:
+            raise ValueError(f"unknown reset options {sorted(unknown)}; known: goal, start_index, facing")
+        rows, facings, goals = [], [], []
+        half = self.config.area / 2.0
+        for rng in rngs:  # a few scalar draws per body at reset, so each body's episode follows its own seed
+            rows.append(int(options["start_index"]) if "start_index" in options else int(rng.choice(self.start_rows)))
+            facings.append(float(options["facing"]) if "facing" in options else float(rng.uniform(-math.pi, math.pi)))
+            if "goal" in options:
+                goals.append(np.asarray(options["goal"], dtype=np.float64).reshape(2))
+                continue
+            goal = rng.uniform(-half, half, size=2)
+            while np.linalg.norm(goal) < self.config.min_goal_distance:
+                goal = rng.uniform(-half, half, size=2)
+            goals.append(goal)
+        return self.initial_state(torch.tensor(rows), torch.tensor(facings, dtype=torch.float32),
+                                  torch.as_tensor(np.stack(goals), dtype=torch.float32))  # fmt: skip
+
+    def observe(self, state: GammaReachState) -> torch.Tensor:
+        """(N, 804): per seed frame, canonical markers and unit marker-to-goal vectors (Eq. 3)."""
+        seed = state.seed
+        bodies = torch.arange(seed.num_bodies, device=self.device)
+        frame = canonical_frame(seed.joints[bodies, 2 - seed.seed_frames])
+        markers = to_canonical(seed.markers.flatten(1, 2), frame).unflatten(1, (2, -1))  # (N, 2, 67, 3)
+        goal = to_canonical(state.goal[:, None], frame)[:, None]  # (N, 1, 1, 3)
+        towards = goal - markers
+        towards = towards / towards.norm(dim=-1, keepdim=True).clamp_min(1e-8)
+        return torch.cat([markers, towards], dim=-1).flatten(1)
+
+    def step(self, state: GammaReachState, z: torch.Tensor) -> tuple[GammaReachState, GammaStepResult]:
+        """Generate one primitive per body from latents z (N, 128) and score it."""
+        config, weights = self.config, self.config.reward
+        z = z.to(self.device, torch.float32).clamp(-config.latent_bound, config.latent_bound)
+        primitive, next_seed = self.generator.step(state.seed, z)
+        joints, goal = primitive.joints, state.goal
+        pelvis_start, pelvis_end = joints[:, 0, PELVIS], joints[:, -1, PELVIS]
+        distance = (pelvis_end[:, :2] - goal[:, :2]).norm(dim=-1)
+        closest = torch.minimum(state.closest, distance)
+        reached = closest <= config.goal_radius
+        slowest = marker_speeds(primitive.markers, GAMMA_FPS, weights.central_difference).amin(dim=(1, 2))
+        with torch.no_grad():
+            latent_mean, _ = self.generator.pose_vae.encode(primitive.body_pose[:, 2:])  # frames new to every body
+        terms = {
+            "path": path_reward(pelvis_start, pelvis_end, goal),
+            "orientation": orientation_reward(joints[:, -1], goal),
+            "contact": contact_reward(pelvis_start[:, 2], pelvis_end[:, 2], slowest, weights.contact_speed_power),
+            "pose_prior": pose_prior_reward(latent_mean, weights.pose_prior_power),
+            "goal": goal_reward(closest, weights.goal_scale, config.goal_radius),
+        }
+        steps = state.steps + 1
+        terminated = reached if config.terminate_on_goal else torch.zeros_like(reached)
+        truncated = (steps >= config.max_primitives) & ~terminated
+        reward = sum(getattr(weights, name) * value for name, value in terms.items())
+        remaining = (config.max_primitives - steps).to(reward.dtype)
+        terms["goal_absorbing"] = goal_absorbing_reward(terminated, remaining, weights.best_step_reward)
+        reward = reward + terms["goal_absorbing"]
+        result = GammaStepResult(reward, terms, distance, reached, terminated, truncated,
+                                 contact_score(primitive.markers, GAMMA_FPS), primitive)  # fmt: skip
+        return GammaReachState(next_seed, goal, steps, closest), result
+
+
+def _step_info(result: GammaStepResult, state: GammaReachState, index: int) -> dict[str, Any]:
+    info: dict[str, Any] = {
+        "reward_terms": {name: float(value[index]) for name, value in result.terms.items()},
+        "distance": float(result.distance[index]),
+        "closest_distance": float(state.closest[index]),
+        "reached": bool(result.reached[index]),
+        "contact_score": float(result.contact_score[index]),
+        "primitives": int(state.steps[index]),
+    }
+    if result.terminated[index] or result.truncated[index]:
+        info["is_success"] = bool(result.reached[index])
+    return info
+
+
+class GammaReachEnv(gym.Env):
+    __doc__ = __doc__
+    metadata = {"render_modes": []}
+
+    def __init__(self, generator: GammaGenerator | None = None, **kwargs: Any) -> None:
+        self.config = config_from_kwargs(GammaReachConfig, kwargs, "GammaReach-v0")
+        self.core = GammaReachCore(self.config, generator)
+        bound = self.config.latent_bound
+        self.action_space = gym.spaces.Box(-bound, bound, (self.core.generator.latent_size,), np.float32)
+        self.observation_space = gym.spaces.Box(-np.inf, np.inf, (OBSERVATION_SIZE,), np.float32)
+        self.state: GammaReachState | None = None
+        self.last_primitive: Primitive | None = None
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        super().reset(seed=seed)
+        self.state = self.core.sample_initial_state([self.np_random], options)
+        self.last_primitive = None
+        info = {"distance": float(self.state.closest[0]), "goal": self.state.goal[0].cpu().numpy()}
+        return self._observation(), info
+
+    def step(self, action: np.ndarray):
+        if self.state is None:
+            raise RuntimeError("call reset() before step()")
+        z = check_actions(action, self.action_space.shape, batch=None)
+        self.state, result = self.core.step(self.state, torch.as_tensor(z)[None])
+        self.last_primitive = result.primitive
+        return (self._observation(), float(result.reward[0]), bool(result.terminated[0]), bool(result.truncated[0]),
+                _step_info(result, self.state, 0))  # fmt: skip
+
+    def _observation(self) -> np.ndarray:
+        return self.core.observe(self.state)[0].cpu().numpy().astype(np.float32)
+
+
+class GammaReachVectorEnv(VectorEnv):
+    """N bodies in one batched core; same-step autoreset (ended bodies restart at once;
+    their last observation and info are in `info["final_obs"]` / `info["final_info"]`)."""
+
+    metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
+
+    def __init__(self, num_envs: int = 1, generator: GammaGenerator | None = None, **kwargs: Any) -> None:
+        self.config = config_from_kwargs(GammaReachConfig, kwargs, "GammaReach-v0")
+        self.core = GammaReachCore(self.config, generator)
+        self.num_envs = num_envs
+        bound = self.config.latent_bound
+        self.single_action_space = gym.spaces.Box(-bound, bound, (self.core.generator.latent_size,), np.float32)
+        self.single_observation_space = gym.spaces.Box(-np.inf, np.inf, (OBSERVATION_SIZE,), np.float32)
+        self.action_space = gym.vector.utils.batch_space(self.single_action_space, num_envs)
+        self.observation_space = gym.vector.utils.batch_space(self.single_observation_space, num_envs)
+        self.rngs = [np.random.default_rng() for _ in range(num_envs)]
+        self.state: GammaReachState | None = None
+        self.last_primitive: Primitive | None = None
+
+    def reset(self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None):
+        if seed is not None:
+            seeds = seed if isinstance(seed, list) else [seed + i for i in range(self.num_envs)]
+            self.rngs = [np.random.default_rng(s) for s in seeds]  # body i follows the single env reset with seed + i
+        self.state = self.core.sample_initial_state(self.rngs, options)
+        return self.core.observe(self.state).cpu().numpy(), {}
+
+    def step(self, actions: np.ndarray):
+        if self.state is None:
+            raise RuntimeError("call reset() before step()")
+        z = check_actions(actions, self.single_action_space.shape, batch=self.num_envs)
+        self.state, result = self.core.step(self.state, torch.as_tensor(z))
+        self.last_primitive = result.primitive
+        done = (result.terminated | result.truncated).cpu()
+        observation = self.core.observe(self.state).cpu().numpy()
+        info: dict[str, Any] = {name: value.cpu().numpy() for name, value in
+                                (("distance", result.distance), ("reached", result.reached),
+                                 ("contact_score", result.contact_score))}  # fmt: skip
+        info["reward_terms"] = {name: value.cpu().numpy() for name, value in result.terms.items()}
+        if done.any():
+            ended = torch.nonzero(done).flatten()
+            info["final_obs"] = np.array([observation[i] if done[i] else None for i in range(self.num_envs)], dtype=object)
+            info["final_info"] = {"is_success": result.reached.cpu().numpy() & done.numpy(), "_is_success": done.numpy()}
+            info["_final_obs"] = info["_final_info"] = done.numpy()
+            fresh = self.core.sample_initial_state([self.rngs[i] for i in ended.tolist()])
+            self.state = self.state.replace_bodies(done.to(self.core.device), _scatter(self.state, fresh, ended))
+            observation = self.core.observe(self.state).cpu().numpy()
+        return (observation, result.reward.cpu().numpy().astype(np.float64), result.terminated.cpu().numpy(),
+                result.truncated.cpu().numpy(), info)  # fmt: skip
+
+
+def _scatter(state: GammaReachState, fresh: GammaReachState, rows: torch.Tensor) -> GammaReachState:
+    """A full-size state holding `fresh`'s bodies at `rows` (other rows: anything; they get masked)."""
+    order = torch.zeros(state.num_bodies, dtype=torch.long)
+    order[rows] = torch.arange(len(rows))
+    return fresh.index(order.to(state.steps.device))

@@ -1,0 +1,145 @@
+"""What every prior's training shares: the resumable epoch loop and shipped weights.
+
+`fit` runs epochs of minibatches with a progress bar and tensorboard, saves
+a run checkpoint (model, optimiser, epoch, history) every few minutes and
+after every epoch, and resumes from it when rerun. `ship` writes float16
+weights plus an entry in `priors/weights/manifest.json`; `load_shipped`
+reads them back as float32 modules.
+"""
+
+from __future__ import annotations
+
+import json
+import random
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any, TypeVar
+
+import numpy as np
+import torch
+from torch import nn
+from torch.utils.tensorboard import SummaryWriter
+from tqdm import tqdm
+
+from motion_envs.atomic import atomic_write
+from motion_envs.priors.checkpoint import load_checkpoint, save_checkpoint
+
+WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
+
+Batch = TypeVar("Batch")
+
+
+@dataclass
+class FitSettings:
+    """Where and how often a training run checkpoints."""
+
+    kind: str
+    run_dir: Path
+    epochs: int
+    seed: int = 0
+    checkpoint_minutes: float = 3.0
+
+
+def seed_everything(seed: int) -> None:
+    torch.manual_seed(seed)
+    random.seed(seed)
+    np.random.seed(seed)
+
+
+def fit(
+    model: nn.Module,
+    optimiser: torch.optim.Optimizer,
+    settings: FitSettings,
+    epoch_batches: Callable[[int, torch.Generator], Sequence[Batch]],
+    loss_terms: Callable[[int, Batch], dict[str, torch.Tensor]],
+    describe: Callable[[int], str] = lambda epoch: "",
+) -> list[float]:
+    """Train `model` for `settings.epochs` epochs (resuming a run checkpoint); returns mean loss per epoch.
+
+    Args:
+        epoch_batches: (epoch, generator) -> the minibatches of that epoch.
+        loss_terms: (epoch, batch) -> named scalar losses including "total", which is minimised.
+        describe: epoch -> a word for the progress bar (e.g. "rollout").
+    """
+    checkpoint_path = settings.run_dir / "checkpoint.pt"
+    config = asdict(model.config) if hasattr(model, "config") else {}
+    start_epoch, history = 0, []
+    if checkpoint_path.exists():
+        state = load_checkpoint(checkpoint_path, settings.kind + "_run", config)
+        model.load_state_dict(state["model"])
+        optimiser.load_state_dict(state["optimiser"])
+        start_epoch, history = state["epoch"], list(state["history"])
+        print(f"resuming {checkpoint_path} at epoch {start_epoch}", file=sys.stderr)
+
+    def save(epoch: int) -> None:
+        save_checkpoint(checkpoint_path, {"kind": settings.kind + "_run", "config": config, "model": model.state_dict(),
+                                          "optimiser": optimiser.state_dict(), "epoch": epoch,
+                                          "history": history[:epoch]})  # fmt: skip
+
+    writer = SummaryWriter(str(settings.run_dir / "tensorboard"))
+    generator = torch.Generator().manual_seed(settings.seed + start_epoch)
+    last_save = time.monotonic()
+    model.train()
+    for epoch in range(start_epoch, settings.epochs):
+        batches = epoch_batches(epoch, generator)
+        sums: dict[str, float] = {}
+        label = f"epoch {epoch + 1}/{settings.epochs} {describe(epoch)}".rstrip()
+        progress = tqdm(batches, desc=label, leave=False, mininterval=2.0)
+        for batch in progress:
+            optimiser.zero_grad()
+            terms = loss_terms(epoch, batch)
+            terms["total"].backward()
+            optimiser.step()
+            for name, value in terms.items():
+                if value.ndim == 0:
+                    sums[name] = sums.get(name, 0.0) + float(value.detach()) / len(batches)
+            progress.set_postfix(loss=f"{terms['total'].item():.4f}")
+            if time.monotonic() - last_save > 60 * settings.checkpoint_minutes:
+                save(epoch)  # mid-epoch: that epoch restarts on resume
+                last_save = time.monotonic()
+        for name, value in sums.items():
+            writer.add_scalar(f"train/{name}", value, epoch)
+        history.append(sums["total"])
+        save(epoch + 1)
+        last_save = time.monotonic()
+        print(f"{label}: loss {sums['total']:.5f}", file=sys.stderr)
+    writer.close()
+    model.eval()
+    return history
+
+
+def ship(model: nn.Module, weights: Path, entry: dict[str, Any]) -> dict[str, Any]:
+    """Write float16 weights with `entry` (kind, config, figures) and record `entry` in the manifest."""
+    half = {name: value.half() if value.is_floating_point() else value for name, value in model.state_dict().items()}
+    entry = {**entry, "torch": str(torch.__version__)}
+    save_checkpoint(weights, {**entry, "model": half})
+    manifest_path = weights.parent / "manifest.json"
+    manifest = json.loads(manifest_path.read_text()) if manifest_path.exists() else {}
+    manifest[weights.name] = entry
+    text = json.dumps(manifest, indent=2) + "\n"
+    atomic_write(manifest_path, lambda file: file.write(text.encode()))
+    return entry
+
+
+Module = TypeVar("Module", bound=nn.Module)
+
+
+def load_shipped(path: str | Path, kind: str, build: Callable[[dict[str, Any]], Module]) -> Module:
+    """A module from `ship`'s weights (float16 on disk, float32 in memory), in eval mode.
+
+    `build` makes the untrained module from the stored config dict.
+    """
+    state = load_checkpoint(path, kind)
+    model = build(state["config"])
+    model.load_state_dict({name: value.float() if value.is_floating_point() else value
+                           for name, value in state["model"].items()})  # fmt: skip
+    return model.eval()
+
+
+def minibatches(indices: torch.Tensor, batch_size: int, generator: torch.Generator) -> list[torch.Tensor]:
+    """Shuffled full minibatches of `indices` (one short batch if there are fewer than `batch_size`)."""
+    order = indices[torch.randperm(len(indices), generator=generator)]
+    return [order[i : i + batch_size] for i in range(0, len(order) - batch_size + 1, batch_size)] or [order]

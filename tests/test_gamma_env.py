@@ -1,0 +1,167 @@
+"""GammaReach-v0 on the shipped GAMMA weights: spaces, checker, state clone/restore, blending, bad input."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+from gymnasium.utils.env_checker import check_env
+
+import motion_envs  # noqa: F401  (registers the ids)
+from motion_envs.body.markers import marker_ids
+from motion_envs.envs.gamma_reach import OBSERVATION_SIZE, GammaReachEnv
+from motion_envs.priors.checkpoint import CheckpointMismatchError
+from motion_envs.priors.gamma_generator import GammaGenerator
+from motion_envs.priors.train_gamma import load_predictor
+from motion_envs.priors.training import WEIGHTS_DIR
+
+ENV_ID = "motion_envs/GammaReach-v0"
+
+
+@pytest.fixture(scope="module")
+def gamma() -> GammaGenerator:
+    return GammaGenerator.load()
+
+
+@pytest.fixture
+def env(gamma) -> GammaReachEnv:
+    return GammaReachEnv(generator=gamma)
+
+
+def _latents(count: int, seed: int) -> np.ndarray:
+    return np.random.default_rng(seed).standard_normal((count, 128)).astype(np.float32)
+
+
+def test_spaces_and_env_checker(env):
+    assert env.action_space.shape == (128,) and env.action_space.dtype == np.float32
+    assert env.observation_space.shape == (OBSERVATION_SIZE,) and env.observation_space.dtype == np.float32
+    check_env(env, skip_render_check=True)
+    observation, info = env.reset(seed=3)
+    assert observation.dtype == np.float32 and env.observation_space.contains(observation)
+    assert info["distance"] >= env.config.min_goal_distance
+
+
+def test_gym_make_and_kwargs():
+    env = gym.make(ENV_ID, reward="release", max_primitives=5)
+    assert env.unwrapped.config.reward.orientation == 0.5 and env.unwrapped.config.max_primitives == 5
+    with pytest.raises(TypeError, match=r"unknown arguments \['max_steps'\]"):
+        gym.make(ENV_ID, max_steps=5)
+    with pytest.raises(ValueError, match="start_kind"):
+        gym.make(ENV_ID, start_kind="running")
+
+
+def test_observation_is_the_papers_state(env):
+    observation, _ = env.reset(seed=0, options={"goal": (0.0, 5.0), "facing": 0.0, "start_index": 0})
+    state = observation.reshape(2, 67, 6)
+    assert np.allclose(state[0], state[1])  # one-frame seed fills both slots
+    assert np.allclose(np.linalg.norm(state[..., 3:], axis=-1), 1.0, atol=1e-5)
+    assert np.abs(state[0, :, :2]).max() < 1.2  # markers around the canonical pelvis
+
+
+def test_reward_terms_lie_in_unit_interval_and_sum_to_the_reward(env):
+    env.reset(seed=1)
+    weights = env.config.reward
+    for z in _latents(6, 1):
+        _, reward, terminated, _, info = env.step(z)
+        terms = info["reward_terms"]
+        for name in ("path", "orientation", "contact", "pose_prior", "goal"):
+            assert 0.0 <= terms[name] <= 1.0, name
+        expected = sum(getattr(weights, name) * terms[name] for name in ("path", "orientation", "contact", "pose_prior", "goal"))
+        assert reward == pytest.approx(expected + terms["goal_absorbing"], rel=1e-5)
+        assert 0.0 < info["contact_score"] <= 1.0
+
+
+def test_clone_and_restore_give_identical_next_steps(env):
+    env.reset(seed=2)
+    for z in _latents(3, 2):
+        env.step(z)
+    saved = env.state.clone()
+    following = _latents(3, 3)
+    first = [env.step(z) for z in following]
+    env.state = saved
+    second = [env.step(z) for z in following]
+    for (obs_a, reward_a, *_), (obs_b, reward_b, *_) in zip(first, second):
+        assert np.array_equal(obs_a, obs_b) and reward_a == reward_b
+
+
+def test_state_repeats_into_clones_that_step_together(gamma):
+    env = GammaReachEnv(generator=gamma)
+    env.reset(seed=4)
+    clones = env.state.repeat(8)
+    assert clones.num_bodies == 8 and torch.equal(clones.index(torch.tensor([5])).goal, env.state.goal)
+    next_state, result = env.core.step(clones, torch.as_tensor(_latents(8, 4)))
+    assert result.reward.shape == (8,) and next_state.steps.tolist() == [1] * 8
+    assert len({round(float(d), 4) for d in result.distance}) > 1  # different latents, different motion
+
+
+def test_markers_are_the_blend_of_prediction_and_the_regressed_body(env, body):
+    env.reset(seed=5)
+    for z in _latents(3, 5):
+        env.step(z)
+    primitive = env.last_primitive
+    posed = body(primitive.transl, primitive.global_orient, primitive.body_pose)
+    skinned = body.skin(posed, marker_ids())
+    new = primitive.new_frames()[0]
+    assert torch.allclose(skinned[0, new], primitive.reprojected_markers[0, new], atol=1e-4)
+    gap = (primitive.markers - skinned)[0, new].norm(dim=-1)
+    half_prediction_gap = 0.5 * (primitive.predicted_markers - skinned)[0, new].norm(dim=-1)
+    assert torch.allclose(gap, half_prediction_gap, atol=1e-4)
+    assert gap.mean() < 0.05  # the regressed body stays within a few cm of its markers
+
+
+def test_bad_actions_raise_clear_errors(env):
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match=r"shape \(128,\)"):
+        env.step(np.zeros(64, dtype=np.float32))
+    bad = np.zeros(128, dtype=np.float32)
+    bad[7] = np.nan
+    with pytest.raises(ValueError, match="NaN or inf"):
+        env.step(bad)
+    bad[7] = np.inf
+    with pytest.raises(ValueError, match="NaN or inf"):
+        env.step(bad)
+
+
+def test_a_reached_goal_terminates_with_success_and_pays_the_remaining_steps(gamma):
+    env = GammaReachEnv(generator=gamma, goal_radius=3.0, max_primitives=10)
+    env.reset(seed=0, options={"goal": (0.0, 1.0), "start_index": 0, "facing": 0.0})
+    _, reward, terminated, truncated, info = env.step(np.zeros(128, dtype=np.float32))
+    assert terminated and not truncated and info["is_success"] and info["reward_terms"]["goal"] == 1.0
+    assert info["reward_terms"]["goal_absorbing"] == pytest.approx(9 * env.config.reward.best_step_reward)
+    far = GammaReachEnv(generator=gamma, max_primitives=2, terminate_on_goal=False)
+    far.reset(seed=0, options={"goal": (9.0, 9.0)})
+    far.step(np.zeros(128, dtype=np.float32))
+    _, _, terminated, truncated, info = far.step(np.zeros(128, dtype=np.float32))
+    assert truncated and not terminated and info["is_success"] is False
+
+
+def test_vector_env_matches_single_envs_with_the_same_seeds(gamma):
+    vector = gym.make_vec(ENV_ID, num_envs=3, vectorization_mode="vector_entry_point", generator=gamma)
+    observations, _ = vector.reset(seed=10)
+    latents = _latents(3, 11)
+    vector_step = vector.step(latents)
+    for i in range(3):
+        single = GammaReachEnv(generator=gamma)
+        observation, _ = single.reset(seed=10 + i)
+        assert np.allclose(observation, observations[i], atol=1e-5)
+        _, reward, *_ = single.step(latents[i])
+        assert reward == pytest.approx(float(vector_step[1][i]), rel=1e-4)
+
+
+def test_vector_env_resets_finished_bodies_in_the_same_step(gamma):
+    vector = gym.make_vec(ENV_ID, num_envs=2, vectorization_mode="vector_entry_point", generator=gamma, max_primitives=2)
+    vector.reset(seed=0)
+    vector.step(_latents(2, 0))
+    _, _, terminated, truncated, info = vector.step(_latents(2, 1))
+    assert (terminated | truncated).all()
+    assert info["_final_obs"].all() and info["final_obs"][0].shape == (OBSERVATION_SIZE,)
+    assert vector.unwrapped.state.steps.tolist() == [0, 0]
+
+
+def test_weights_of_another_model_fail_clearly():
+    with pytest.raises(CheckpointMismatchError, match="expected 'gamma_predictor'"):
+        load_predictor(WEIGHTS_DIR / "gamma_regressor.pt")
+    one = load_predictor(WEIGHTS_DIR / "gamma_predictor_1f.pt")
+    with pytest.raises(ValueError, match="predictor_1f must take 1 seed frame"):
+        GammaGenerator(one, one, None, None)

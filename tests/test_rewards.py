@@ -1,0 +1,82 @@
+"""GAMMA's reward terms and contact score against hand-computed values."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+import torch
+
+from motion_envs.metrics import contact_score, marker_speeds
+from motion_envs.priors.canonical import LEFT_HIP, PELVIS, RIGHT_HIP
+from motion_envs.rewards import (
+    RewardConfig,
+    contact_reward,
+    facing_direction,
+    goal_absorbing_reward,
+    goal_reward,
+    orientation_reward,
+    path_reward,
+    pose_prior_reward,
+)
+
+
+def test_path_reward_is_one_towards_the_goal_zero_away_half_across():
+    start = torch.zeros(3, 2)
+    end = torch.tensor([[1.0, 0.0]] * 3)
+    goals = torch.tensor([[10.0, 0.0], [-10.0, 0.0], [0.0, 10.0]])
+    assert torch.allclose(path_reward(start, end, goals), torch.tensor([1.0, 0.0, 0.5]), atol=1e-6)
+
+
+def _joints_facing(direction: float) -> torch.Tensor:
+    """Joints whose hips make the body face `direction` (radians from +x) with the pelvis at (1, 1)."""
+    joints = torch.zeros(1, 22, 3)
+    joints[0, PELVIS] = torch.tensor([1.0, 1.0, 0.9])
+    right = torch.tensor([math.cos(direction - math.pi / 2), math.sin(direction - math.pi / 2), 0.0])
+    joints[0, RIGHT_HIP] = joints[0, PELVIS] + 0.1 * right
+    joints[0, LEFT_HIP] = joints[0, PELVIS] - 0.1 * right
+    return joints
+
+
+def test_facing_and_orientation_reward():
+    joints = _joints_facing(math.pi / 2)  # facing +y
+    assert torch.allclose(facing_direction(joints), torch.tensor([[0.0, 1.0]]), atol=1e-6)
+    assert orientation_reward(joints, torch.tensor([[1.0, 5.0]])).item() == pytest.approx(1.0, abs=1e-6)
+    assert orientation_reward(joints, torch.tensor([[1.0, -5.0]])).item() == pytest.approx(0.0, abs=1e-6)
+    assert orientation_reward(joints, torch.tensor([[6.0, 1.0]])).item() == pytest.approx(0.5, abs=1e-6)
+
+
+def test_contact_reward_paper_and_release_shapes():
+    z0, z1, speed = torch.tensor([0.9]), torch.tensor([1.0]), torch.tensor([0.2])
+    assert contact_reward(z0, z1, speed).item() == pytest.approx(math.exp(-0.1) * math.exp(-0.04), rel=1e-5)
+    assert contact_reward(z0, z1, speed, speed_power=1.0).item() == pytest.approx(math.exp(-0.1) * math.exp(-0.2), rel=1e-5)
+
+
+def test_pose_prior_goal_and_absorbing_terms():
+    mean = torch.zeros(2, 4, 32)
+    mean[1, :, 0] = 1.0  # |μ| = 1 every frame
+    assert torch.allclose(pose_prior_reward(mean), torch.tensor([1.0, math.exp(-1.0)]))
+    distances = torch.tensor([0.5, 5.0, 25.0])
+    assert torch.allclose(goal_reward(distances, scale=20.0, tolerance=0.75), torch.tensor([1.0, 0.75, 0.0]))
+    bonus = goal_absorbing_reward(torch.tensor([True, False]), torch.tensor([10.0, 10.0]), 5.0)
+    assert bonus.tolist() == [50.0, 0.0]
+
+
+def test_reward_configs():
+    assert RewardConfig.named("paper") == RewardConfig.paper()
+    release = RewardConfig.named("release")
+    assert release.orientation == 0.5 and release.goal_scale == 10.0 and release.central_difference
+    assert RewardConfig.paper().best_step_reward == 5.0
+    with pytest.raises(ValueError, match="unknown reward config 'fast'"):
+        RewardConfig.named("fast")
+
+
+def test_marker_speeds_and_contact_score():
+    markers = torch.zeros(2, 3, 1, 3)
+    markers[:, :, 0, 0] = torch.tensor([0.0, 0.01, 0.03])  # 0.4 m/s then 0.8 m/s at 40 fps
+    assert torch.allclose(marker_speeds(markers, 40.0)[0, :, 0], torch.tensor([0.4, 0.8]))
+    assert torch.allclose(marker_speeds(markers, 40.0, central=True)[0, :, 0], torch.tensor([0.6]))
+    markers[1, :, 0, 0] = 0.0  # a still marker on the ground: perfect contact
+    markers[0, :, 0, 2] = 0.15  # 10 cm above the threshold height
+    expected = math.exp(-0.10) * math.exp(-(0.4 - 0.075))
+    assert torch.allclose(contact_score(markers, 40.0), torch.tensor([expected, 1.0]), atol=1e-6)

@@ -14,6 +14,7 @@ here). Writes `benchmarks/results/gamma_realism.md` and
 
 from __future__ import annotations
 
+import json
 import time
 from pathlib import Path
 
@@ -35,10 +36,39 @@ from motion_envs.data.start_poses import load_start_poses  # noqa: E402
 from motion_envs.metrics import contact_score, foot_skating  # noqa: E402
 from motion_envs.priors.canonical import PELVIS  # noqa: E402
 from motion_envs.priors.gamma_generator import GammaGenerator  # noqa: E402
+from motion_envs.priors.training import WEIGHTS_DIR  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 SKATING_SPEED = 0.2
 """m/s: WANDR's 0.66 cm per frame at 30 fps."""
+
+
+def prior_lines() -> list[str]:
+    """The shipped priors' validation figures, from `priors/weights/manifest.json`."""
+    manifest = json.loads((WEIGHTS_DIR / "manifest.json").read_text())
+    lines = ["## Shipped priors (validation split, from the weights manifest)", ""]
+    for name in ("gamma_predictor_1f.pt", "gamma_predictor_2f.pt"):
+        entry = manifest.get(name)
+        if entry is None:
+            continue
+        errors = entry["validation_marker_error_cm_per_frame"]
+        rollout = next(key for key in errors if key.startswith("rollout"))
+        lines += [
+            f"**{name}** ({entry['epochs']} single-primitive + {entry['rollout_epochs']} rollout epochs; "
+            f"`{entry['command']}`): marker error (cm) per predicted frame, posterior mean z:",
+            "",
+            "| | " + " | ".join(str(i + 1) for i in range(len(errors["primitive"]))) + " | mean |",
+            "|---|" + "---|" * (len(errors["primitive"]) + 1),
+            "| one primitive | " + " | ".join(f"{e:.2f}" for e in errors["primitive"]) + f" | {np.mean(errors['primitive']):.2f} |",
+            "",
+            f"8-primitive rollout (each seeded by the previous prediction), per frame: "
+            + ", ".join(f"{e:.1f}" for e in errors[rollout]) + f"; mean {np.mean(errors[rollout]):.2f}.",
+            "",
+        ]
+    for name in ("gamma_regressor.pt", "gamma_pose_vae.pt"):
+        if name in manifest:
+            lines += [f"**{name}** (`{manifest[name]['command']}`): {json.dumps(manifest[name]['validation'])}", ""]
+    return lines
 
 
 def motion_figures(markers: torch.Tensor, feet: torch.Tensor, pelvis: torch.Tensor) -> dict[str, float]:
@@ -130,6 +160,7 @@ def main(mocap_dir: Path | None = None, cache_dir: Path | None = None, subsets: 
         f"Generation: {bodies * primitives / generation_seconds:,.0f} body-primitives/s "
         f"({generation_seconds:.1f} s for {bodies} bodies × {primitives} primitives, one batch).",
         "",
+        *prior_lines(),
         machine_line(),
         f"Command: `motion-envs bench gamma-realism`; {time.perf_counter() - began:.0f} s in all.",
         "",

@@ -67,14 +67,23 @@ def _train(args: argparse.Namespace) -> int:
 
     report = build(mocap_dir=args.mocap_dir, cache_dir=args.cache_dir, subsets=tuple(args.subset), fps_list=(GAMMA_FPS,))
     dataset = MotionDataset.load(report.caches[GAMMA_FPS])
-    chosen = {"epochs": args.epochs, "batch_size": args.batch_size, "run_dir": args.run_dir, "weights": args.weights}
+    given = {"epochs": args.epochs, "batch_size": args.batch_size, "run_dir": args.run_dir, "weights": args.weights,
+             "window_stride": args.window_stride, "rollout_epochs": args.rollout_epochs}  # fmt: skip
     common = {"data_hash": report.caches[GAMMA_FPS].stem, "command": "motion-envs " + " ".join(sys.argv[1:]),
-              **{name: value for name, value in chosen.items() if value is not None}}  # fmt: skip
+              **{name: value for name, value in given.items() if value is not None}}  # fmt: skip
     entry = stages[args.stage](args, dataset, common)
     for name, value in entry.items():
         if name.startswith("validation"):
             print(f"{name}: {json.dumps(value)}")
     return 0
+
+
+def _train_config(config_type: type, common: dict, **extra):
+    """`config_type` from the command's options that it has (others belong to other stages)."""
+    from dataclasses import fields
+
+    names = {field.name for field in fields(config_type)}
+    return config_type(**{name: value for name, value in common.items() if name in names}, **extra)
 
 
 def _marker_clips(dataset, split: str, mirrored: bool = False):
@@ -89,15 +98,14 @@ def _train_gamma_predictor(args: argparse.Namespace, dataset, common: dict) -> d
     from motion_envs.priors.train_gamma import PredictorTrainConfig, train_predictor
 
     common.setdefault("run_dir", Path(f"runs/gamma_predictor_{args.seed_frames}f"))
-    config = PredictorTrainConfig(model=MarkerCVAEConfig(seed_frames=args.seed_frames), rollout_epochs=args.rollout_epochs,
-                                  window_stride=args.window_stride, **common)  # fmt: skip
+    config = _train_config(PredictorTrainConfig, common, model=MarkerCVAEConfig(seed_frames=args.seed_frames))
     return train_predictor(config, _marker_clips(dataset, "train", mirrored=True), _marker_clips(dataset, "validation"))
 
 
 def _train_gamma_regressor(args: argparse.Namespace, dataset, common: dict) -> dict:
     from motion_envs.priors.train_regressor import RegressorTrainConfig, train_regressor
 
-    config = RegressorTrainConfig(window_stride=args.window_stride, **common)
+    config = _train_config(RegressorTrainConfig, common)
     return train_regressor(config, _marker_clips(dataset, "train", mirrored=True), _marker_clips(dataset, "validation"))
 
 
@@ -111,7 +119,7 @@ def _train_gamma_pose_vae(args: argparse.Namespace, dataset, common: dict) -> di
         clips = dataset.clips(split, mirrored=mirrored)
         return torch.as_tensor(np.concatenate([clip.body_pose for clip in clips]), dtype=torch.float32)
 
-    return train_pose_vae(PoseVAETrainConfig(**common), poses("train", True), poses("validation", False))
+    return train_pose_vae(_train_config(PoseVAETrainConfig, common), poses("train", True), poses("validation", False))
 
 
 def _not_yet(what: str):
@@ -150,9 +158,9 @@ def parser() -> argparse.ArgumentParser:
     train.add_argument("--stage", default="predictor", help="gamma: predictor | regressor | pose-vae")
     train.add_argument("--seed-frames", type=int, default=2, choices=(1, 2), help="predictor: seed frames")
     train.add_argument("--epochs", type=int, default=None, help="epochs (predictor: single-primitive epochs)")
-    train.add_argument("--rollout-epochs", type=int, default=5, help="predictor: 8-primitive rollout epochs after those")
+    train.add_argument("--rollout-epochs", type=int, default=None, help="predictor: 8-primitive rollout epochs after those")
     train.add_argument("--batch-size", type=int, default=None, help="default: the stage's own")
-    train.add_argument("--window-stride", type=int, default=2, help="frames between training windows")
+    train.add_argument("--window-stride", type=int, default=None, help="frames between training windows")
     train.add_argument("--run-dir", type=Path, default=None, help="checkpoints and tensorboard logs")
     train.add_argument("--weights", type=Path, default=None, help="output (default: priors/weights/)")
     _add_data_args(train, ["cmu"])

@@ -165,3 +165,14 @@ def test_weights_of_another_model_fail_clearly():
     one = load_predictor(WEIGHTS_DIR / "gamma_predictor_1f.pt")
     with pytest.raises(ValueError, match="predictor_1f must take 1 seed frame"):
         GammaGenerator(one, one, None, None)
+
+
+def test_stable_baselines3_ppo_runs_on_the_env(gamma):
+    from stable_baselines3 import PPO
+
+    env = GammaReachEnv(generator=gamma, max_primitives=8)
+    model = PPO("MlpPolicy", env, n_steps=16, batch_size=16, n_epochs=1, seed=0, device="cpu")
+    model.learn(total_timesteps=32)
+    observation, _ = env.reset(seed=0)
+    action, _ = model.predict(observation, deterministic=True)
+    assert action.shape == (128,) and env.action_space.contains(action)

@@ -54,8 +54,10 @@ def test_contact_reward_paper_and_release_shapes():
 
 def test_pose_prior_goal_and_absorbing_terms():
     mean = torch.zeros(2, 4, 32)
-    mean[1, :, 0] = 1.0  # |μ| = 1 every frame
+    mean[1, :, :2] = 4.0  # |μ| = sqrt(32), rms 1, every frame
     assert torch.allclose(pose_prior_reward(mean), torch.tensor([1.0, math.exp(-1.0)]))
+    mean[1, :2, :2] = 0.0  # rms 0 on half the frames
+    assert torch.allclose(pose_prior_reward(mean, power=1.0)[1], torch.tensor(math.exp(-0.5)))
     distances = torch.tensor([0.5, 5.0, 25.0])
     assert torch.allclose(goal_reward(distances, scale=20.0, tolerance=0.75), torch.tensor([1.0, 0.75, 0.0]))
     bonus = goal_absorbing_reward(torch.tensor([True, False]), torch.tensor([10.0, 10.0]), 5.0)

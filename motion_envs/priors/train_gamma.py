@@ -9,7 +9,7 @@ minutes and after every epoch; rerunning the same command resumes.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import torch
@@ -17,13 +17,13 @@ import torch
 from motion_envs.data.primitives import PRIMITIVE_FRAMES, MarkerClips, MarkerWindows
 from motion_envs.priors.canonical import canonical_frame, to_canonical, to_world
 from motion_envs.priors.gamma import MarkerCVAE, MarkerCVAEConfig, predictor_loss
-from motion_envs.priors.training import WEIGHTS_DIR, FitSettings, fit, load_shipped, minibatches, seed_everything, ship
+from motion_envs.priors.training import WEIGHTS_DIR, TrainRun, fit, load_shipped, minibatches, seed_everything, ship
 
 PREDICTOR_KIND = "gamma_predictor"
 
 
 @dataclass
-class PredictorTrainConfig:
+class PredictorTrainConfig(TrainRun):
     """Settings of one predictor training run (the paper: 200 epochs, then rollout fine-tuning)."""
 
     model: MarkerCVAEConfig = field(default_factory=MarkerCVAEConfig)
@@ -33,12 +33,7 @@ class PredictorTrainConfig:
     batch_size: int = 128
     learning_rate: float = 5e-4
     window_stride: int = 2
-    checkpoint_minutes: float = 3.0
-    seed: int = 0
     run_dir: Path = Path("runs/gamma_predictor")
-    weights: Path | None = None
-    data_hash: str = ""
-    command: str = ""
 
     def rollout_frames(self) -> int:
         seed = self.model.seed_frames
@@ -100,8 +95,7 @@ def train_predictor(config: PredictorTrainConfig, train: MarkerClips, validation
     seed_everything(config.seed)
     model = MarkerCVAE(config.model)
     optimiser = torch.optim.Adam(model.parameters(), lr=config.learning_rate)
-    settings = FitSettings(PREDICTOR_KIND, config.run_dir, config.epochs + config.rollout_epochs, config.seed,
-                           config.checkpoint_minutes)  # fmt: skip
+    settings = config.fit_settings(PREDICTOR_KIND, config.epochs + config.rollout_epochs)
 
     def rollout(epoch: int) -> bool:
         return epoch >= config.epochs
@@ -119,16 +113,8 @@ def train_predictor(config: PredictorTrainConfig, train: MarkerClips, validation
         return {name: value for name, value in terms.items() if name != "frame_error"}
 
     history = fit(model, optimiser, settings, epoch_batches, loss_terms, lambda e: "rollout" if rollout(e) else "")
-    entry = {
-        "kind": PREDICTOR_KIND,
-        "config": asdict(config.model),
-        "data_hash": config.data_hash,
-        "command": config.command,
-        "epochs": config.epochs,
-        "rollout_epochs": config.rollout_epochs,
-        "train_loss_by_epoch": [round(v, 5) for v in history],
-        "validation_marker_error_cm_per_frame": validate(model, validation, config.rollout_primitives),
-    }
+    entry = config.entry(PREDICTOR_KIND, config.model, history, rollout_epochs=config.rollout_epochs,
+                         validation_marker_error_cm_per_frame=validate(model, validation, config.rollout_primitives))  # fmt: skip
     return ship(model, config.weights or WEIGHTS_DIR / f"gamma_predictor_{config.model.seed_frames}f.pt", entry)
 
 

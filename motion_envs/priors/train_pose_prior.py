@@ -9,31 +9,25 @@ poses, the quantity r_vposer (GAMMA Eq. 8) turns into a reward.
 from __future__ import annotations
 
 import sys
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import torch
 
 from motion_envs.body.rotations import rotation_matrix
 from motion_envs.priors.gamma import PoseVAE, PoseVAEConfig, pose_vae_loss
-from motion_envs.priors.training import WEIGHTS_DIR, FitSettings, fit, load_shipped, minibatches, seed_everything, ship
+from motion_envs.priors.training import WEIGHTS_DIR, TrainRun, fit, load_shipped, minibatches, seed_everything, ship
 
 POSE_VAE_KIND = "gamma_pose_vae"
 
 
 @dataclass
-class PoseVAETrainConfig:
+class PoseVAETrainConfig(TrainRun):
     model: PoseVAEConfig = field(default_factory=PoseVAEConfig)
     epochs: int = 30
     batch_size: int = 256
-    learning_rate: float = 1e-3
     kl_weight: float = 5e-3
-    checkpoint_minutes: float = 3.0
-    seed: int = 0
     run_dir: Path = Path("runs/gamma_pose_vae")
-    weights: Path | None = None
-    data_hash: str = ""
-    command: str = ""
 
 
 @torch.no_grad()
@@ -53,7 +47,7 @@ def train_pose_vae(config: PoseVAETrainConfig, train_poses: torch.Tensor, valida
     seed_everything(config.seed)
     model = PoseVAE(config.model)
     optimiser = torch.optim.Adam(model.parameters(), lr=config.learning_rate)
-    settings = FitSettings(POSE_VAE_KIND, config.run_dir, config.epochs, config.seed, config.checkpoint_minutes)
+    settings = config.fit_settings(POSE_VAE_KIND)
 
     def epoch_batches(epoch: int, generator: torch.Generator) -> list[torch.Tensor]:
         return minibatches(torch.arange(len(train_poses)), config.batch_size, generator)
@@ -64,16 +58,7 @@ def train_pose_vae(config: PoseVAETrainConfig, train_poses: torch.Tensor, valida
     history = fit(model, optimiser, settings, epoch_batches, loss_terms)
     figures = validate_pose_vae(model, validation_poses)
     print(f"validation: {figures}", file=sys.stderr)
-    entry = {
-        "kind": POSE_VAE_KIND,
-        "config": asdict(config.model),
-        "data_hash": config.data_hash,
-        "command": config.command,
-        "epochs": config.epochs,
-        "kl_weight": config.kl_weight,
-        "train_loss_by_epoch": [round(v, 5) for v in history],
-        "validation": figures,
-    }
+    entry = config.entry(POSE_VAE_KIND, config.model, history, kl_weight=config.kl_weight, validation=figures)
     return ship(model, config.weights or WEIGHTS_DIR / "gamma_pose_vae.pt", entry)
 
 

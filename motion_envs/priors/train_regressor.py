@@ -13,7 +13,7 @@ loosely determined (twists of the forearms and neck).
 from __future__ import annotations
 
 import sys
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import torch
@@ -23,28 +23,22 @@ from motion_envs.body.markers import marker_ids
 from motion_envs.body.rotations import rotation_matrix
 from motion_envs.data.primitives import PRIMITIVE_FRAMES, MarkerClips
 from motion_envs.priors.gamma import BodyRegressor, BodyRegressorConfig
-from motion_envs.priors.training import WEIGHTS_DIR, FitSettings, fit, load_shipped, minibatches, seed_everything, ship
+from motion_envs.priors.training import WEIGHTS_DIR, TrainRun, fit, load_shipped, minibatches, seed_everything, ship
 
 REGRESSOR_KIND = "gamma_regressor"
 
 
 @dataclass
-class RegressorTrainConfig:
-    """Settings of one regressor training run (release: lr 3e-4, batch 16, 100 epochs)."""
+class RegressorTrainConfig(TrainRun):
+    """Settings of one regressor training run (release: lr 3e-4, batch 16, 100 epochs). Batches count
+    windows (of 10 frames each)."""
 
     model: BodyRegressorConfig = field(default_factory=BodyRegressorConfig)
-    epochs: int = 10
-    batch_size: int = 64
-    """Windows per batch (times 10 frames)."""
+    batch_size: int = 16
     learning_rate: float = 3e-4
     pose_weight: float = 1e-3
-    window_stride: int = 2
-    checkpoint_minutes: float = 3.0
-    seed: int = 0
+    window_stride: int = 4
     run_dir: Path = Path("runs/gamma_regressor")
-    weights: Path | None = None
-    data_hash: str = ""
-    command: str = ""
 
 
 def regressor_loss(
@@ -82,7 +76,7 @@ def train_regressor(config: RegressorTrainConfig, train: MarkerClips, validation
     body = BodyModel()
     model = BodyRegressor(config.model)
     optimiser = torch.optim.Adam(model.parameters(), lr=config.learning_rate)
-    settings = FitSettings(REGRESSOR_KIND, config.run_dir, config.epochs, config.seed, config.checkpoint_minutes)
+    settings = config.fit_settings(REGRESSOR_KIND)
 
     def epoch_batches(epoch: int, generator: torch.Generator) -> list[torch.Tensor]:
         return minibatches(train.window_starts(PRIMITIVE_FRAMES, config.window_stride), config.batch_size, generator)
@@ -94,15 +88,7 @@ def train_regressor(config: RegressorTrainConfig, train: MarkerClips, validation
     history = fit(model, optimiser, settings, epoch_batches, loss_terms)
     figures = validate_regressor(model, body, validation)
     print(f"validation: {figures}", file=sys.stderr)
-    entry = {
-        "kind": REGRESSOR_KIND,
-        "config": asdict(config.model),
-        "data_hash": config.data_hash,
-        "command": config.command,
-        "epochs": config.epochs,
-        "train_loss_by_epoch": [round(v, 5) for v in history],
-        "validation": figures,
-    }
+    entry = config.entry(REGRESSOR_KIND, config.model, history, validation=figures)
     return ship(model, config.weights or WEIGHTS_DIR / "gamma_regressor.pt", entry)
 
 

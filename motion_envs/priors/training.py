@@ -43,6 +43,30 @@ class FitSettings:
     checkpoint_minutes: float = 3.0
 
 
+@dataclass
+class TrainRun:
+    """Settings every prior's training run shares; each prior's config extends it."""
+
+    epochs: int = 10
+    batch_size: int = 64
+    learning_rate: float = 1e-3
+    checkpoint_minutes: float = 3.0
+    seed: int = 0
+    run_dir: Path = Path("runs/prior")
+    weights: Path | None = None
+    """Output file (default: the prior's name under priors/weights/)."""
+    data_hash: str = ""
+    command: str = ""
+
+    def fit_settings(self, kind: str, epochs: int | None = None) -> FitSettings:
+        return FitSettings(kind, self.run_dir, self.epochs if epochs is None else epochs, self.seed, self.checkpoint_minutes)
+
+    def entry(self, kind: str, model_config: Any, history: list[float], **figures: Any) -> dict[str, Any]:
+        """The manifest entry of a finished run: what, from which data and command, and how well."""
+        return {"kind": kind, "config": asdict(model_config), "data_hash": self.data_hash, "command": self.command,
+                "epochs": self.epochs, "train_loss_by_epoch": [round(v, 5) for v in history], **figures}  # fmt: skip
+
+
 def seed_everything(seed: int) -> None:
     torch.manual_seed(seed)
     random.seed(seed)

@@ -1,0 +1,54 @@
+"""The SB3 adapter over the native batched GAMMA env."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+
+import motion_envs  # noqa: F401
+from agents.vec_env import NativeVecEnv
+from motion_envs.envs.gamma_reach import GammaReachEnv
+from motion_envs.priors.gamma_generator import GammaGenerator
+
+
+@pytest.fixture(scope="module")
+def gamma() -> GammaGenerator:
+    return GammaGenerator.load()
+
+
+def test_adapter_matches_the_native_env_step_for_step(gamma):
+    venv = NativeVecEnv.make("motion_envs/GammaReach-v0", num_envs=3, generator=gamma)
+    venv.seed(20)
+    observations = venv.reset()
+    actions = np.random.default_rng(0).standard_normal((2, 3, 128)).astype(np.float32)
+    stepped = [venv.step(a) for a in actions]
+    for i in range(3):
+        single = GammaReachEnv(generator=gamma)
+        observation, _ = single.reset(seed=20 + i)
+        assert np.allclose(observation, observations[i], atol=1e-5)
+        for a, (vec_obs, vec_rewards, vec_dones, _) in zip(actions, stepped):
+            observation, reward, terminated, truncated, _ = single.step(a[i])
+            assert reward == pytest.approx(float(vec_rewards[i]), rel=1e-4)
+            assert bool(vec_dones[i]) == (terminated or truncated)
+            assert np.allclose(observation, vec_obs[i], atol=1e-4)
+
+
+def test_adapter_reports_episode_ends_as_sb3_expects(gamma):
+    venv = VecMonitor(NativeVecEnv.make("motion_envs/GammaReach-v0", num_envs=2, generator=gamma, max_primitives=2))
+    venv = VecNormalize(venv)
+    venv.reset()
+    venv.step(np.zeros((2, 128), dtype=np.float32))
+    _, _, dones, infos = venv.step(np.zeros((2, 128), dtype=np.float32))
+    assert dones.all()
+    for info in infos:
+        assert info["TimeLimit.truncated"] is True and info["is_success"] in (True, False)
+        assert info["terminal_observation"].shape == (804,) and info["episode"]["l"] == 2
+
+
+def test_adapter_rejects_next_step_autoreset_envs():
+    import gymnasium as gym
+
+    vector = gym.make_vec("CartPole-v1", num_envs=2, vectorization_mode="sync")
+    with pytest.raises(ValueError, match="same-step autoreset"):
+        NativeVecEnv(vector)

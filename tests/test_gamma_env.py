@@ -156,6 +156,7 @@ def test_vector_env_resets_finished_bodies_in_the_same_step(gamma):
     _, _, terminated, truncated, info = vector.step(_latents(2, 1))
     assert (terminated | truncated).all()
     assert info["_final_obs"].all() and info["final_obs"][0].shape == (OBSERVATION_SIZE,)
+    assert info["final_obs"][0].dtype == np.float32
     assert vector.unwrapped.state.steps.tolist() == [0, 0]
 
 

@@ -334,7 +334,9 @@ class GammaReachVectorEnv(VectorEnv):
         info["reward_terms"] = {name: value.cpu().numpy() for name, value in result.terms.items()}
         if done.any():
             ended = torch.nonzero(done).flatten()
-            info["final_obs"] = np.array([observation[i] if done[i] else None for i in range(self.num_envs)], dtype=object)
+            info["final_obs"] = np.empty(self.num_envs, dtype=object)  # one array per ended body, None elsewhere
+            for i in ended.tolist():
+                info["final_obs"][i] = observation[i]
             info["final_info"] = {"is_success": result.reached.cpu().numpy() & done.numpy(), "_is_success": done.numpy()}
             info["_final_obs"] = info["_final_info"] = done.numpy()
             fresh = self.core.sample_initial_state([self.rngs[i] for i in ended.tolist()])

@@ -1,0 +1,84 @@
+"""PPO with GAMMA's latent regulariser (Eq. 10) as a Stable-Baselines3 algorithm.
+
+    L = L_PPO + E[(R_t - V(s_t))²] + α Ψ(KL(π(z|s) ‖ N(0, I))),   Ψ(s) = sqrt(1 + s²) - 1,
+
+the KL averaged over latent dimensions and the minibatch (the authors'
+release, REFERENCE_NOTES §1.6). The regulariser keeps the policy's latents
+where the motion prior was trained, so the motion stays natural.
+
+How it joins SB3's loss without copying `PPO.train`: `LatentPriorPolicy`
+keeps the action distribution of its latest forward pass, and during
+`train()` the optimiser's `zero_grad` is followed by the backward pass of
+α Ψ(KL) of that distribution (the minibatch just evaluated). SB3 then adds
+the PPO loss's gradient and steps, so the update is exactly the gradient of
+the sum above (gradient clipping included). Everything else is SB3's PPO:
+`learn`, `save`/`load`, callbacks, `predict`, tensorboard (`train/prior_kl`).
+
+Paper defaults differ from SB3's: `gae_lambda=1` (the paper's Monte-Carlo
+returns), `target_kl=0.02 / 1.5` (SB3 stops at 1.5 × target_kl; the release
+stops at an approximate KL of 0.02), `clip_range=0.2`, `gamma=0.99`.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import torch
+from stable_baselines3 import PPO
+from stable_baselines3.common.distributions import DiagGaussianDistribution
+from stable_baselines3.common.policies import ActorCriticPolicy
+
+from motion_envs.priors.gamma import kl_to_standard_normal, robust_kl
+
+PAPER_SETTINGS: dict[str, Any] = {"gamma": 0.99, "gae_lambda": 1.0, "clip_range": 0.2, "target_kl": 0.02 / 1.5,
+                                  "normalize_advantage": True}  # fmt: skip
+
+
+class LatentPriorPolicy(ActorCriticPolicy):
+    """SB3's actor-critic policy that remembers the Gaussian of its latest forward pass."""
+
+    last_distribution: DiagGaussianDistribution | None = None
+
+    def _get_action_dist_from_latent(self, latent_pi: torch.Tensor):
+        distribution = super()._get_action_dist_from_latent(latent_pi)
+        if not isinstance(distribution, DiagGaussianDistribution):
+            raise TypeError(f"PPOKL needs a diagonal Gaussian policy over a Box action space, got {type(distribution).__name__}")
+        self.last_distribution = distribution
+        return distribution
+
+    def prior_kl(self) -> torch.Tensor:
+        """Mean over dims and batch of KL(π(z|s) ‖ N(0, I)) for the latest forward pass."""
+        normal = self.last_distribution.distribution
+        return kl_to_standard_normal(normal.loc, 2.0 * normal.scale.log()).mean()
+
+
+class PPOKL(PPO):
+    """PPO + α Ψ(KL(π ‖ N(0, I))). `kl_prior_coef` is α (paper: 1 or 10); other arguments are SB3's PPO's,
+    with the paper's settings (`PAPER_SETTINGS`) where not given."""
+
+    policy_aliases = {"MlpPolicy": LatentPriorPolicy}
+
+    def __init__(self, policy: str | type[LatentPriorPolicy], env: Any, kl_prior_coef: float = 10.0, **kwargs: Any) -> None:
+        if kl_prior_coef < 0:
+            raise ValueError(f"kl_prior_coef must be >= 0, got {kl_prior_coef}")
+        self.kl_prior_coef = kl_prior_coef
+        super().__init__(policy, env, **{**PAPER_SETTINGS, **kwargs})
+
+    def train(self) -> None:
+        optimiser = self.policy.optimizer
+        plain_zero_grad = optimiser.zero_grad
+        values: list[float] = []
+
+        def zero_grad_then_regularise(set_to_none: bool = True) -> None:
+            plain_zero_grad(set_to_none=set_to_none)
+            kl = self.policy.prior_kl()
+            values.append(float(kl.detach()))
+            (self.kl_prior_coef * robust_kl(kl)).backward(retain_graph=True)  # the PPO loss shares this graph
+
+        optimiser.zero_grad = zero_grad_then_regularise
+        try:
+            super().train()
+        finally:
+            optimiser.zero_grad = plain_zero_grad
+        if values:
+            self.logger.record("train/prior_kl", sum(values) / len(values))

@@ -54,7 +54,25 @@ def _bench_gamma_realism(args: argparse.Namespace) -> int:
                          rollouts=args.rollouts, primitives=args.primitives, seed=args.seed)  # fmt: skip
 
 
+def _train_ppo(args: argparse.Namespace) -> int:
+    from agents.train_ppo import PPOTrainConfig, train_ppo
+
+    given = {"env_id": args.env, "reward": args.reward, "alpha": args.alpha, "num_envs": args.num_envs,
+             "total_timesteps": args.timesteps, "run_dir": args.run_dir, "weights": args.weights, "seed": args.seed}  # fmt: skip
+    config = PPOTrainConfig(command="motion-envs " + " ".join(sys.argv[1:]),
+                            **{name: value for name, value in given.items() if value is not None})  # fmt: skip
+    if config.run_dir == PPOTrainConfig.run_dir:
+        config.run_dir = Path(f"runs/{config.weights_path().stem}")
+    entry = train_ppo(config)
+    last = entry["curve"][-1] if entry["curve"] else {}
+    print(f"{entry['timesteps']} steps; latest success rate {last.get('success_rate', float('nan')):.2f}; "
+          f"weights {config.weights_path()}")
+    return 0
+
+
 def _train(args: argparse.Namespace) -> int:
+    if args.what == "ppo":
+        return _train_ppo(args)
     if args.what != "gamma":
         return _not_yet(f"train {args.what}")(args)
     stages = {"predictor": _train_gamma_predictor, "regressor": _train_gamma_regressor, "pose-vae": _train_gamma_pose_vae}
@@ -154,7 +172,7 @@ def parser() -> argparse.ArgumentParser:
     starts.set_defaults(run=_data_start_poses)
 
     train = commands.add_parser("train", help="train a prior or a policy (resumable: rerun the same command)")
-    train.add_argument("what", help="gamma | wandr | clops | ppo | dqn (gamma so far)")
+    train.add_argument("what", help="gamma | ppo | wandr | clops | dqn (gamma and ppo so far)")
     train.add_argument("--stage", default="predictor", help="gamma: predictor | regressor | pose-vae")
     train.add_argument("--seed-frames", type=int, default=2, choices=(1, 2), help="predictor: seed frames")
     train.add_argument("--epochs", type=int, default=None, help="epochs (predictor: single-primitive epochs)")
@@ -163,6 +181,12 @@ def parser() -> argparse.ArgumentParser:
     train.add_argument("--window-stride", type=int, default=None, help="frames between training windows")
     train.add_argument("--run-dir", type=Path, default=None, help="checkpoints and tensorboard logs")
     train.add_argument("--weights", type=Path, default=None, help="output (default: priors/weights/)")
+    train.add_argument("--env", default=None, help="ppo: environment id (default motion_envs/GammaReach-v0)")
+    train.add_argument("--reward", default=None, help="ppo: reward config, paper | release")
+    train.add_argument("--alpha", type=float, default=None, help="ppo: weight of the KL-to-prior regulariser (paper: 1, 10)")
+    train.add_argument("--num-envs", type=int, default=None, help="ppo: bodies stepped together")
+    train.add_argument("--timesteps", type=int, default=None, help="ppo: total env steps (primitives)")
+    train.add_argument("--seed", type=int, default=None)
     _add_data_args(train, ["cmu"])
     train.set_defaults(run=_train)
 

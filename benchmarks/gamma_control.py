@@ -98,7 +98,11 @@ def main(pairs: int = 100, clones: int = 32, candidates: int = 16, seed: int = 0
         pairs, clones, candidates = 20, 4, 8
     began = time.perf_counter()
     core = GammaReachCore(GammaReachConfig())
-    controllers: dict[str, Controller] = {"random z": RandomLatent(seed), f"greedy best-of-{candidates} (reward)": GreedyLatent(candidates, seed)}
+    controllers: dict[str, Controller] = {
+        "random z": RandomLatent(seed),
+        f"greedy best-of-{candidates} by reward": GreedyLatent(candidates, "reward", seed),
+        f"greedy best-of-{candidates} by distance": GreedyLatent(candidates, "distance", seed),
+    }
     start = fixed_pairs(core, pairs, clones, seed)
     rows: dict[str, dict] = {}
     seconds: dict[str, float] = {}

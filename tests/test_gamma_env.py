@@ -177,3 +177,18 @@ def test_stable_baselines3_ppo_runs_on_the_env(gamma):
     observation, _ = env.reset(seed=0)
     action, _ = model.predict(observation, deterministic=True)
     assert action.shape == (128,) and env.action_space.contains(action)
+
+
+def test_generator_steps_mixed_one_and_two_frame_seeds_as_separate_batches(gamma):
+    env = GammaReachEnv(generator=gamma)
+    env.reset(seed=6)
+    started = env.state.seed  # one-frame seed
+    _, moving = gamma.step(started, torch.as_tensor(_latents(1, 6)))  # two-frame seed
+    mixed = type(started).cat([started, moving])
+    z = torch.as_tensor(_latents(2, 7))
+    together, _ = gamma.step(mixed, z)
+    alone_one, _ = gamma.step(started, z[:1])
+    alone_two, _ = gamma.step(moving, z[1:])
+    assert torch.allclose(together.markers[0], alone_one.markers[0], atol=1e-5)
+    assert torch.allclose(together.markers[1], alone_two.markers[0], atol=1e-5)
+    assert together.new_frames().sum(dim=1).tolist() == [9, 8]

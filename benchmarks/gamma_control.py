@@ -30,6 +30,7 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
+from agents.controllers import PolicyLatent  # noqa: E402
 from baselines.latent_controllers import GreedyLatent, RandomLatent  # noqa: E402
 from benchmarks.machine import machine_line  # noqa: E402
 from motion_envs.atomic import atomic_write  # noqa: E402
@@ -38,6 +39,7 @@ from motion_envs.data.primitives import GAMMA_FPS  # noqa: E402
 from motion_envs.envs.gamma_reach import GammaReachConfig, GammaReachCore, GammaReachState  # noqa: E402
 from motion_envs.metrics import foot_skating  # noqa: E402
 from motion_envs.priors.canonical import PELVIS  # noqa: E402
+from motion_envs.priors.training import WEIGHTS_DIR  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 SKATING_SPEED = 0.2
@@ -103,6 +105,8 @@ def main(pairs: int = 100, clones: int = 32, candidates: int = 16, seed: int = 0
         f"greedy best-of-{candidates} by reward": GreedyLatent(candidates, "reward", seed),
         f"greedy best-of-{candidates} by distance": GreedyLatent(candidates, "distance", seed),
     }
+    for policy in sorted(WEIGHTS_DIR.glob("ppo_gammareach_*.zip")):  # every shipped GammaReach policy
+        controllers[f"PPO {policy.stem.removeprefix('ppo_gammareach_')}"] = PolicyLatent(policy, seed=seed)
     start = fixed_pairs(core, pairs, clones, seed)
     rows: dict[str, dict] = {}
     seconds: dict[str, float] = {}

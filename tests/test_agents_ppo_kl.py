@@ -51,3 +51,17 @@ def test_save_load_round_trip(venv, tmp_path):
 def test_negative_coefficient_is_rejected(venv):
     with pytest.raises(ValueError, match="kl_prior_coef"):
         PPOKL("MlpPolicy", venv, kl_prior_coef=-1.0)
+
+
+def test_a_saved_policy_drives_the_batched_core(venv, tmp_path):
+    from agents.controllers import PolicyLatent
+
+    model = PPOKL("MlpPolicy", venv, n_steps=8, batch_size=32, n_epochs=1, seed=0, device="cpu")
+    model.save(tmp_path / "policy.zip")
+    core = venv.vector_env.unwrapped.core
+    state = core.sample_initial_state([np.random.default_rng(i) for i in range(5)])
+    mean = PolicyLatent(tmp_path / "policy.zip", deterministic=True)(core, state)
+    expected, _ = model.predict(core.observe(state).numpy(), deterministic=True)
+    assert np.allclose(np.clip(mean.numpy(), -4, 4), expected, atol=1e-5)  # SB3's predict clips to the Box; the env does too
+    sampled = PolicyLatent(tmp_path / "policy.zip", seed=1)(core, state)
+    assert sampled.shape == (5, 128) and not torch.allclose(sampled, mean)

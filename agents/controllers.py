@@ -1,0 +1,32 @@
+"""Trained policies as batched controllers: `controller(core, state) -> z (N, latent)`.
+
+The same call shape as `baselines.latent_controllers`, so benchmarks and the
+tree search run learned and non-learned controllers alike.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import torch
+
+from agents.ppo_kl import PPOKL
+from motion_envs.envs.gamma_reach import GammaReachCore, GammaReachState
+
+
+class PolicyLatent:
+    """A saved PPOKL policy. Sampled latents by default, as the paper (its release does not use the mean)."""
+
+    def __init__(self, path: str | Path, deterministic: bool = False, seed: int = 0) -> None:
+        self.model = PPOKL.load(path, device="cpu")
+        self.deterministic = deterministic
+        self.generator = torch.Generator().manual_seed(seed)
+
+    @torch.no_grad()
+    def __call__(self, core: GammaReachCore, state: GammaReachState) -> torch.Tensor:
+        observations = core.observe(state).to(self.model.device)
+        distribution = self.model.policy.get_distribution(observations).distribution
+        if self.deterministic:
+            return distribution.loc.cpu()
+        noise = torch.randn(distribution.loc.shape, generator=self.generator)
+        return (distribution.loc + distribution.scale * noise.to(distribution.loc.device)).cpu()

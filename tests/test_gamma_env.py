@@ -192,3 +192,12 @@ def test_generator_steps_mixed_one_and_two_frame_seeds_as_separate_batches(gamma
     assert torch.allclose(together.markers[0], alone_one.markers[0], atol=1e-5)
     assert torch.allclose(together.markers[1], alone_two.markers[0], atol=1e-5)
     assert together.new_frames().sum(dim=1).tolist() == [9, 8]
+
+
+def test_start_bodies_stand_on_the_ground(env, body):
+    from motion_envs.body.markers import foot_vertex_ids
+
+    core = env.core
+    posed = body(core.start_transl, core.start_orient, core.start_pose)
+    lowest = body.skin(posed, foot_vertex_ids())[..., 2].amin(dim=-1)
+    assert lowest.abs().max() < 1e-4

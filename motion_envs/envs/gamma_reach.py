@@ -37,7 +37,8 @@ primitives at the best per-step reward (`goal_absorbing`; see
 
 A start window from the validation data (`motion_envs/assets/start_poses.npz`,
 standing or walking, `start_kind`), its last frame placed with the pelvis
-over the centre, facing a uniformly random direction. The goal is uniform on
+over the centre, facing a uniformly random direction, its lowest foot point
+snapped to the ground. The goal is uniform on
 the ground, at least `min_goal_distance` from the start.
 
 ## Episode End
@@ -74,6 +75,7 @@ import torch
 from gymnasium.vector import AutoresetMode, VectorEnv
 
 from motion_envs.batched import BatchedState
+from motion_envs.body.markers import foot_vertex_ids
 from motion_envs.data.primitives import GAMMA_FPS
 from motion_envs.data.start_poses import load_start_poses
 from motion_envs.envs.core import check_actions, config_from_kwargs
@@ -161,6 +163,10 @@ class GammaReachCore:
             return torch.as_tensor(starts[name][:, -1], dtype=torch.float32, device=self.device)
 
         self.start_transl, self.start_orient, self.start_pose = last_frame("transl"), last_frame("global_orient"), last_frame("body_pose")
+        with torch.no_grad():  # snap each start body to the ground, as the paper does (the data's floor drifts a few cm)
+            posed = self.generator.body(self.start_transl, self.start_orient, self.start_pose)
+            lowest = self.generator.body.skin(posed, foot_vertex_ids())[..., 2].amin(dim=-1)
+        self.start_transl[:, 2] -= lowest
 
     @property
     def num_starts(self) -> int:
@@ -263,9 +269,13 @@ def _step_info(result: GammaStepResult, state: GammaReachState, index: int) -> d
 
 class GammaReachEnv(gym.Env):
     __doc__ = __doc__
-    metadata = {"render_modes": []}
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 5}
+    """One rendered frame per primitive (the last of its 8 new frames at 40 fps): 5 frames per second."""
 
-    def __init__(self, generator: GammaGenerator | None = None, **kwargs: Any) -> None:
+    def __init__(self, generator: GammaGenerator | None = None, render_mode: str | None = None, **kwargs: Any) -> None:
+        if render_mode not in (None, *self.metadata["render_modes"]):
+            raise ValueError(f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}")
+        self.render_mode = render_mode
         self.config = config_from_kwargs(GammaReachConfig, kwargs, "GammaReach-v0")
         self.core = GammaReachCore(self.config, generator)
         bound = self.config.latent_bound
@@ -273,11 +283,14 @@ class GammaReachEnv(gym.Env):
         self.observation_space = gym.spaces.Box(-np.inf, np.inf, (OBSERVATION_SIZE,), np.float32)
         self.state: GammaReachState | None = None
         self.last_primitive: Primitive | None = None
+        self.trail: list[np.ndarray] = []
+        self._renderer = None
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
         self.state = self.core.sample_initial_state([self.np_random], options)
         self.last_primitive = None
+        self.trail = [self._pelvis()]
         info = {"distance": float(self.state.closest[0]), "goal": self.state.goal[0].cpu().numpy()}
         return self._observation(), info
 
@@ -287,8 +300,27 @@ class GammaReachEnv(gym.Env):
         z = check_actions(action, self.action_space.shape, batch=None)
         self.state, result = self.core.step(self.state, torch.as_tensor(z)[None])
         self.last_primitive = result.primitive
+        self.trail.append(self._pelvis())
         return (self._observation(), float(result.reward[0]), bool(result.terminated[0]), bool(result.truncated[0]),
                 _step_info(result, self.state, 0))  # fmt: skip
+
+    def render(self) -> np.ndarray | None:
+        """rgb_array: the body now (last frame), its goal and pelvis trail, from a camera that follows it."""
+        if self.render_mode is None or self.state is None:
+            return None
+        from motion_envs.render.camera import follow_camera
+        from motion_envs.render.third_person import ThirdPersonRenderer
+
+        if self._renderer is None:
+            self._renderer = ThirdPersonRenderer(self.core.generator.body)
+        seed = self.state.seed.to("cpu")
+        vertices = self._renderer.vertices(seed.transl[:, -1], seed.global_orient[:, -1], seed.body_pose[:, -1])
+        goal = self.state.goal[0].cpu().numpy()
+        camera = follow_camera(self.trail[-1])
+        return self._renderer.render(vertices, camera, goal=goal, goal_radius=self.config.goal_radius, trail=np.array(self.trail))
+
+    def _pelvis(self) -> np.ndarray:
+        return self.state.seed.joints[0, -1, PELVIS].cpu().numpy()
 
     def _observation(self) -> np.ndarray:
         return self.core.observe(self.state)[0].cpu().numpy().astype(np.float32)

@@ -1,0 +1,59 @@
+"""Ray-cast third-person rendering: real embree images of real bodies, and videos of an env."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from motion_envs.render.camera import Camera, follow_camera
+from motion_envs.render.third_person import ThirdPersonRenderer, body_mesh
+
+
+def test_lower_detail_mesh_keeps_a_subset_of_the_vertices():
+    mesh = body_mesh(0.015)
+    assert 5_000 < len(mesh.vertex_ids) < 24_256 and mesh.faces.max() == len(mesh.vertex_ids) - 1
+    assert len(np.unique(mesh.vertex_ids)) == len(mesh.vertex_ids)
+
+
+def test_camera_projects_its_own_rays_back_to_their_pixels():
+    camera = Camera(np.array([-3.0, -4.0, 2.0]), np.array([0.0, 0.0, 0.9]), width=64, height=48)
+    directions = camera.ray_directions()
+    points = camera.eye + 2.5 * directions[[0, 10, 47], [0, 33, 63]]
+    pixels, in_front = camera.project(points)
+    assert in_front.all() and np.allclose(pixels, [[0, 0], [10, 33], [47, 63]], atol=1e-6)
+
+
+def test_render_shows_the_body_the_goal_and_the_trail(body):
+    renderer = ThirdPersonRenderer(body, width=160, height=120)
+    vertices = renderer.vertices(torch.tensor([[0.0, 0.0, 0.93]]), torch.zeros(1, 3), torch.zeros(1, 21, 3))
+    camera = follow_camera(np.array([0.0, 0.0, 0.9]), width=160, height=120)
+    image = renderer.render(vertices, camera, goal=np.array([1.5, 1.0, 0.0]), trail=np.array([[0, -2, 0.9], [0, 0, 0.9]]))
+    assert image.shape == (120, 160, 3) and image.dtype == np.uint8
+    pixels = image.reshape(-1, 3).astype(int)
+    wood = (pixels[:, 0] > pixels[:, 2] + 40) & (pixels[:, 1] > pixels[:, 2] + 10)
+    green = (pixels[:, 1] > pixels[:, 0] + 40) & (pixels[:, 1] > pixels[:, 2] + 40)
+    assert 100 < wood.sum() < 0.5 * len(pixels)  # the body is there and is not everything
+    assert green.sum() > 10
+    empty = renderer.render(vertices + np.array([0.0, 0.0, 50.0]), camera)  # body far above the view
+    assert not ((empty.reshape(-1, 3)[:, 0].astype(int) > empty.reshape(-1, 3)[:, 2].astype(int) + 40).sum() > 100)
+
+
+def test_env_renders_and_records_a_video(tmp_path):
+    import gymnasium as gym
+    from gymnasium.wrappers import RecordVideo
+
+    import motion_envs  # noqa: F401
+
+    env = gym.make("motion_envs/GammaReach-v0", render_mode="rgb_array", max_primitives=3)
+    env = RecordVideo(env, str(tmp_path), episode_trigger=lambda episode: True, disable_logger=True)
+    env.reset(seed=0)
+    for _ in range(3):
+        env.step(np.zeros(128, dtype=np.float32))
+    env.close()
+    videos = list(tmp_path.glob("*.mp4"))
+    assert len(videos) == 1 and videos[0].stat().st_size > 1_000
+    from motion_envs.envs.gamma_reach import GammaReachEnv
+
+    with pytest.raises(ValueError, match="render_mode"):
+        GammaReachEnv(render_mode="depth")

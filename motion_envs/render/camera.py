@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -32,15 +33,10 @@ class Camera:
         """Focal length in pixels."""
         return 0.5 * self.height / np.tan(np.radians(self.fov) / 2.0)
 
-    def ray_directions(self, rows: np.ndarray | None = None, columns: np.ndarray | None = None) -> np.ndarray:
-        """Unit directions (H, W, 3) of the rays through pixel centres (or through the given pixel index grids)."""
-        if rows is None or columns is None:
-            rows, columns = np.meshgrid(np.arange(self.height), np.arange(self.width), indexing="ij")
-        forward, right, up = self.axes()
-        u = columns + 0.5 - self.width / 2.0
-        v = self.height / 2.0 - rows - 0.5
-        directions = self.focal * forward + u[..., None] * right + v[..., None] * up
-        return directions / np.linalg.norm(directions, axis=-1, keepdims=True)
+    def ray_directions(self) -> np.ndarray:
+        """Unit directions (H, W, 3) float32 of the rays through pixel centres (read-only: cached by orientation)."""
+        forward, right, _ = self.axes()
+        return _ray_directions(self.width, self.height, self.fov, tuple(np.round(forward, 9)), tuple(np.round(right, 9)))
 
     def project(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """World points (P, 3) -> pixel (row, column) floats (P, 2) and a mask of points in front of the camera."""
@@ -51,6 +47,20 @@ class Camera:
         column = self.width / 2.0 + self.focal * (relative @ right) / safe - 0.5
         row = self.height / 2.0 - self.focal * (relative @ up) / safe - 0.5
         return np.stack([row, column], axis=-1), depth > 1e-6
+
+
+@lru_cache(maxsize=8)
+def _ray_directions(width: int, height: int, fov: float, forward: tuple, right: tuple) -> np.ndarray:
+    forward, right = np.asarray(forward), np.asarray(right)
+    up = np.cross(right, forward)
+    rows, columns = np.meshgrid(np.arange(height), np.arange(width), indexing="ij")
+    focal = 0.5 * height / np.tan(np.radians(fov) / 2.0)
+    u = columns + 0.5 - width / 2.0
+    v = height / 2.0 - rows - 0.5
+    directions = focal * forward + u[..., None] * right + v[..., None] * up
+    directions = (directions / np.linalg.norm(directions, axis=-1, keepdims=True)).astype(np.float32)
+    directions.flags.writeable = False
+    return directions
 
 
 def follow_camera(target: np.ndarray, width: int = 480, height: int = 360, distance: float = 5.5,

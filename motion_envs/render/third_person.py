@@ -71,7 +71,7 @@ class ThirdPersonRenderer:
                trail: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
         """One image. vertices: (B, V, 3) posed bodies from `vertices`; goal: (3,) on the ground; trail: (T, 3)."""
         height, width = camera.height, camera.width
-        directions = camera.ray_directions()  # (H, W, 3)
+        directions = camera.ray_directions()  # (H, W, 3) float32, cached per camera orientation
         image = self._background(directions, camera, vertices, goal, goal_radius)
         hit = self._cast_bodies(vertices, camera, directions)
         if hit is not None:
@@ -84,38 +84,47 @@ class ThirdPersonRenderer:
 
     def _background(self, directions: np.ndarray, camera: Camera, vertices: np.ndarray, goal: np.ndarray | None,
                     goal_radius: float) -> np.ndarray:  # fmt: skip
-        """Sky gradient and the analytic ground: grid, goal ring, contact shadows. (H, W, 3) floats."""
-        up = directions[..., 2]
-        image = SKY_BOTTOM + (SKY_TOP - SKY_BOTTOM) * np.clip(up, 0.0, 1.0)[..., None]
-        downward = up < -1e-4
-        distance = -camera.eye[2] / np.where(downward, up, -1.0)
-        points = camera.eye[:2] + distance[..., None] * directions[..., :2]  # ground hits (x, y)
+        """Sky gradient and the analytic ground: grid, goal ring, contact shadows. (H, W, 3) float32.
+
+        The camera has no roll, so the ground is the rows below the horizon: only those are shaded."""
+        up = directions[:, 0, 2]
+        image = np.empty(directions.shape, dtype=np.float32)
+        image[:] = (SKY_BOTTOM + (SKY_TOP - SKY_BOTTOM) * np.clip(up, 0.0, 1.0)[:, None])[:, None, :]
+        first = int(np.searchsorted(-up, 1e-4))  # rows are ordered top (up > 0) to bottom (up < 0)
+        rays = directions[first:]
+        if len(rays) == 0:
+            return image
+        distance = np.float32(-camera.eye[2]) / rays[..., 2]
+        points = camera.eye[:2].astype(np.float32) + distance[..., None] * rays[..., :2]  # ground hits (x, y)
         fraction = np.abs(points - np.round(points))
-        line_width = np.clip(0.004 * distance, 0.01, 0.06)[..., None]
-        ground = np.where((fraction < line_width).any(-1, keepdims=True), GRID, GROUND)
-        fade = np.exp(-distance / 40.0)[..., None]  # far ground fades into the horizon
-        ground = ground * fade + SKY_BOTTOM * (1.0 - fade)
+        line = (fraction < np.clip(0.004 * distance, 0.01, 0.06)[..., None]).any(-1)
+        fade = np.exp(-distance / 25.0)  # far ground fades into the horizon
+        shade = (np.where(line, GRID[0], GROUND[0]) * fade + SKY_BOTTOM[0] * (1.0 - fade))[..., None]
+        ground = (shade * (GROUND / GROUND[0])).astype(np.float32)
         if goal is not None:
-            to_goal = np.linalg.norm(points - np.asarray(goal)[:2], axis=-1)
-            ring = (to_goal < goal_radius) & (to_goal > goal_radius - 0.08)
-            ground = np.where((to_goal < goal_radius)[..., None], 0.6 * ground + 0.4 * GOAL, ground)
-            ground = np.where(ring[..., None], GOAL, ground)
-        ground = ground * self._shadow(points, vertices)[..., None]
-        return np.where(downward[..., None], ground, image)
+            to_goal = np.hypot(points[..., 0] - goal[0], points[..., 1] - goal[1])
+            inside = to_goal < goal_radius
+            ground[inside] = 0.6 * ground[inside] + 0.4 * GOAL
+            ground[inside & (to_goal > goal_radius - 0.08)] = GOAL
+        self._shade_shadows(ground, points, vertices)
+        image[first:] = ground
+        return image
 
     @staticmethod
-    def _shadow(points: np.ndarray, vertices: np.ndarray) -> np.ndarray:
-        """(H, W) ground darkening: a soft blob under each body, darker where its lowest vertices touch (contact cue)."""
-        factor = np.ones(points.shape[:-1])
+    def _shade_shadows(ground: np.ndarray, points: np.ndarray, vertices: np.ndarray) -> None:
+        """Darken `ground` (R, W, 3) in place: a soft blob under each body, darker where its lowest
+        vertices touch (the contact cue). Only ground points within 1 m of a body are touched."""
         for body in vertices:  # a handful of bodies per image
             centre = body[:, :2].mean(axis=0)
-            blob = np.exp(-np.sum((points - centre) ** 2, axis=-1) / (2 * 0.25**2))
-            factor *= 1.0 - 0.25 * blob
+            near = np.nonzero((np.abs(points[..., 0] - centre[0]) < 1.0) & (np.abs(points[..., 1] - centre[1]) < 1.0))
+            if len(near[0]) == 0:
+                continue
+            local = points[near]
+            factor = 1.0 - 0.25 * np.exp(-np.sum((local - centre) ** 2, axis=-1) / (2 * 0.25**2))
             low = body[body[:, 2] < 0.03]  # vertices within 3 cm of the ground
-            if len(low):
-                for contact in low[:: max(1, len(low) // 24), :2]:
-                    factor *= 1.0 - 0.5 * np.exp(-np.sum((points - contact) ** 2, axis=-1) / (2 * 0.05**2))
-        return factor
+            for contact in low[:: max(1, len(low) // 24), :2]:
+                factor *= 1.0 - 0.5 * np.exp(-np.sum((local - contact) ** 2, axis=-1) / (2 * 0.05**2))
+            ground[near] *= factor[:, None].astype(np.float32)
 
     def _cast_bodies(self, vertices: np.ndarray, camera: Camera, directions: np.ndarray):
         """Rays of the pixels the bodies' projection covers -> (rows, columns, unit normals) of hits, or None."""

@@ -21,7 +21,7 @@ def test_camera_projects_its_own_rays_back_to_their_pixels():
     directions = camera.ray_directions()
     points = camera.eye + 2.5 * directions[[0, 10, 47], [0, 33, 63]]
     pixels, in_front = camera.project(points)
-    assert in_front.all() and np.allclose(pixels, [[0, 0], [10, 33], [47, 63]], atol=1e-6)
+    assert in_front.all() and np.allclose(pixels, [[0, 0], [10, 33], [47, 63]], atol=1e-4)  # float32 rays
 
 
 def test_render_shows_the_body_the_goal_and_the_trail(body):

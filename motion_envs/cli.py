@@ -54,6 +54,16 @@ def _bench_gamma_realism(args: argparse.Namespace) -> int:
                          rollouts=args.rollouts, primitives=args.primitives, seed=args.seed)  # fmt: skip
 
 
+def _play(args: argparse.Namespace) -> int:
+    from motion_envs.play import play
+
+    for summary in play(args.env_id, args.policy, args.baseline, args.video, args.seed, args.episodes, args.every):
+        print(" ".join(f"{name}={value}" for name, value in summary.items()))
+    if args.video:
+        print(f"video: {args.video}")
+    return 0
+
+
 def _train_ppo(args: argparse.Namespace) -> int:
     from agents.train_ppo import PPOTrainConfig, train_ppo
 
@@ -210,9 +220,15 @@ def parser() -> argparse.ArgumentParser:
     realism.add_argument("--seed", type=int, default=0)
     realism.set_defaults(run=_bench_gamma_realism)
 
-    play = commands.add_parser("play", help="watch a policy or prior in an environment")
-    play.add_argument("env_id", nargs="?")
-    play.set_defaults(run=_not_yet("play"))
+    play = commands.add_parser("play", help="run episodes with a policy or baseline; write a video and a summary")
+    play.add_argument("env_id", help="e.g. motion_envs/GammaReach-v0")
+    play.add_argument("--policy", type=Path, default=None, help="a saved PPOKL policy (.zip)")
+    play.add_argument("--baseline", default=None, help="random | greedy-reward | greedy-distance (default random)")
+    play.add_argument("--video", type=Path, default=None, help="write an mp4 of every generated frame")
+    play.add_argument("--seed", type=int, default=0)
+    play.add_argument("--episodes", type=int, default=1)
+    play.add_argument("--every", type=int, default=2, help="keep every n-th frame in the video (40 fps / n)")
+    play.set_defaults(run=_play)
     return root
 
 

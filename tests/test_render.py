@@ -57,3 +57,17 @@ def test_env_renders_and_records_a_video(tmp_path):
 
     with pytest.raises(ValueError, match="render_mode"):
         GammaReachEnv(render_mode="depth")
+
+
+def test_play_writes_a_video_of_every_kept_frame_and_summarises(tmp_path):
+    import imageio.v3 as iio
+
+    from motion_envs.play import play
+
+    video = tmp_path / "episode.mp4"
+    (summary,) = play("motion_envs/GammaReach-v0", baseline="random", video=video, every=4, max_primitives=3)
+    assert summary["steps"] == 3 and summary["success"] is False and 0.0 <= summary["foot_skating"] <= 1.0
+    frames = iio.imread(video)
+    assert frames.shape[1:] == (360, 480, 3) and len(frames) == 3 + 2 + 2  # 9, 8, 8 new frames, every 4th
+    with pytest.raises(ValueError, match="unknown baseline"):
+        play("motion_envs/GammaReach-v0", baseline="dance")

@@ -1,7 +1,10 @@
 """`motion-envs train ppo`: PPOKL on a native batched env, resumable, with a learning curve.
 
 Reads top to bottom: vector env (one process, `num_envs` bodies) -> VecMonitor
--> PPOKL (new, or the run's latest checkpoint) -> learn with a callback that
+-> VecNormalize (rewards only: returns reach ~300 with the goal-absorbing
+reward, and SB3 clips the gradient norm of policy and value losses together,
+so unscaled returns starve the policy; observations stay raw, so a saved
+policy needs no statistics) -> PPOKL (new, or the run's latest checkpoint) -> learn with a callback that
 every `checkpoint_minutes` saves the model atomically and appends the
 success rate of the episodes finished since the last save -> final policy
 under `priors/weights/` + manifest entry + learning-curve plot (success
@@ -11,6 +14,7 @@ rate against env steps and against wall time).
 from __future__ import annotations
 
 import json
+import pickle
 import sys
 import time
 from dataclasses import asdict, dataclass
@@ -23,9 +27,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 from stable_baselines3.common.callbacks import BaseCallback  # noqa: E402
-from stable_baselines3.common.vec_env import VecMonitor  # noqa: E402
+from stable_baselines3.common.vec_env import VecMonitor, VecNormalize  # noqa: E402
 
-from agents.ppo_kl import PPOKL  # noqa: E402
+from agents.ppo_kl import PAPER_SETTINGS, PPOKL  # noqa: E402
 from agents.vec_env import NativeVecEnv  # noqa: E402
 from motion_envs.atomic import atomic_write  # noqa: E402
 from motion_envs.priors.training import WEIGHTS_DIR  # noqa: E402
@@ -42,7 +46,8 @@ class PPOTrainConfig:
     n_epochs: int = 3
     learning_rate: float = 3e-4
     total_timesteps: int = 500_000
-    net_width: int = 512
+    net_width: int = 256
+    """Hidden width of the policy and value MLPs (two layers each); 256 keeps a saved policy under 10 MB."""
     checkpoint_minutes: float = 3.0
     seed: int = 0
     run_dir: Path = Path("runs/ppo")
@@ -82,6 +87,7 @@ class CurveCallback(BaseCallback):
             self.logger.record("rollout/success_rate_window", self.curve[-1]["success_rate"])
             self.successes = []
         atomic_write(self.run_dir / "model.zip", self.model.save)
+        atomic_write(self.run_dir / "vecnormalize.pkl", lambda file: pickle.dump(self.model.get_vec_normalize_env(), file))
         text = json.dumps(self.curve, indent=1)
         atomic_write(self.run_dir / "curve.json", lambda file: file.write(text.encode()))
 
@@ -91,6 +97,11 @@ def train_ppo(config: PPOTrainConfig) -> dict:
     torch.manual_seed(config.seed)
     venv = VecMonitor(NativeVecEnv.make(config.env_id, num_envs=config.num_envs, reward=config.reward))
     venv.seed(config.seed)
+    statistics = config.run_dir / "vecnormalize.pkl"
+    if statistics.exists():
+        venv = VecNormalize.load(str(statistics), venv)
+    else:
+        venv = VecNormalize(venv, norm_obs=False, norm_reward=True, gamma=PAPER_SETTINGS["gamma"])
     checkpoint = config.run_dir / "model.zip"
     curve_path = config.run_dir / "curve.json"
     curve = json.loads(curve_path.read_text()) if curve_path.exists() else []

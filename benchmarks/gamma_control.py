@@ -37,12 +37,11 @@ from motion_envs.atomic import atomic_write  # noqa: E402
 from motion_envs.body.markers import foot_vertex_ids  # noqa: E402
 from motion_envs.data.primitives import GAMMA_FPS  # noqa: E402
 from motion_envs.envs.gamma_reach import GammaReachConfig, GammaReachCore, GammaReachState  # noqa: E402
-from motion_envs.metrics import foot_skating  # noqa: E402
+from motion_envs.metrics import foot_skating, skating_threshold  # noqa: E402
 from motion_envs.priors.canonical import PELVIS  # noqa: E402
 from motion_envs.priors.training import WEIGHTS_DIR  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
-SKATING_SPEED = 0.2
 PAPER_ROWS = {  # GAMMA Table 1: steps, success rate, avg. dist., contact score
     "g-CVAE (paper)": (24.1, 0.91, 3.46, 0.80),
     "policy(10) (paper)": (33.9, 0.95, 3.32, 0.94),
@@ -77,7 +76,7 @@ def run_controller(core: GammaReachCore, state: GammaReachState, controller: Con
         contact.append(result.contact_score)
         feet = body.skin(body(primitive.transl, primitive.global_orient, primitive.body_pose), feet_ids)
         first = 0 if step == 0 else 1  # transitions from the last seed frame on (start pose: 1-frame seed)
-        skating.append(foot_skating(feet[:, first:], SKATING_SPEED / GAMMA_FPS).float().flatten())
+        skating.append(foot_skating(feet[:, first:], skating_threshold(GAMMA_FPS)).float().flatten())
         paths[active, step + 1] = primitive.joints[:, -1, PELVIS, :2]
         done = result.terminated | result.truncated
         ended = active[done]

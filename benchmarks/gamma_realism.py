@@ -33,14 +33,12 @@ from motion_envs.data.build import build  # noqa: E402
 from motion_envs.data.dataset import MotionDataset  # noqa: E402
 from motion_envs.data.primitives import GAMMA_FPS, PRIMITIVE_FRAMES  # noqa: E402
 from motion_envs.data.start_poses import load_start_poses  # noqa: E402
-from motion_envs.metrics import contact_score, foot_skating  # noqa: E402
+from motion_envs.metrics import contact_score, foot_skating, skating_threshold  # noqa: E402
 from motion_envs.priors.canonical import PELVIS  # noqa: E402
 from motion_envs.priors.gamma_generator import GammaGenerator  # noqa: E402
 from motion_envs.priors.training import WEIGHTS_DIR  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
-SKATING_SPEED = 0.2
-"""m/s: WANDR's 0.66 cm per frame at 30 fps."""
 
 
 def prior_lines() -> list[str]:
@@ -80,7 +78,7 @@ def motion_figures(markers: torch.Tensor, feet: torch.Tensor, pelvis: torch.Tens
     speed = (pelvis[:, 1:, :2] - pelvis[:, :-1, :2]).norm(dim=-1) * GAMMA_FPS
     return {
         "contact score (Eq. 11)": float(contact_score(windows, GAMMA_FPS).mean()),
-        "FS": float(foot_skating(feet, SKATING_SPEED / GAMMA_FPS).float().mean()),
+        "FS": float(foot_skating(feet, skating_threshold(GAMMA_FPS)).float().mean()),
         "pelvis ground speed (m/s)": float(speed.mean()),
         "pelvis height (m)": float(pelvis[..., 2].mean()),
         "frames with pelvis below 0.6 m": float((pelvis[..., 2] < 0.6).float().mean()),

@@ -8,6 +8,11 @@ WANDR_SKATING_THRESHOLD = 2.0 / 3.0 * 0.01
 """WANDR's FS threshold: 0.66 cm between consecutive frames at 30 fps (0.2 m/s)."""
 
 
+def skating_threshold(fps: float) -> float:
+    """WANDR's FS threshold at another frame rate: the same 0.2 m/s, in metres per frame."""
+    return WANDR_SKATING_THRESHOLD * 30.0 / fps
+
+
 def foot_skating(feet: torch.Tensor, threshold: float = WANDR_SKATING_THRESHOLD) -> torch.Tensor:
     """WANDR's foot skating per frame transition.
 

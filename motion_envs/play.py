@@ -18,12 +18,11 @@ import torch
 from motion_envs.body.markers import foot_vertex_ids
 from motion_envs.data.primitives import GAMMA_FPS
 from motion_envs.envs.gamma_reach import GammaReachEnv
-from motion_envs.metrics import foot_skating
+from motion_envs.metrics import foot_skating, skating_threshold
 from motion_envs.priors.canonical import PELVIS
 from motion_envs.render.camera import follow_camera
 from motion_envs.render.third_person import ThirdPersonRenderer
 
-SKATING_SPEED = 0.2
 BASELINES = ("random", "greedy-reward", "greedy-distance")
 
 
@@ -98,5 +97,5 @@ def _episode(env: GammaReachEnv, controller: Callable, renderer: ThirdPersonRend
         "steps": steps,
         "final_distance": round(info["distance"], 3),
         "contact_score": round(float(np.mean(contact)), 3),
-        "foot_skating": round(float(foot_skating(all_feet, SKATING_SPEED / GAMMA_FPS).float().mean()), 3),
+        "foot_skating": round(float(foot_skating(all_feet, skating_threshold(GAMMA_FPS)).float().mean()), 3),
     }

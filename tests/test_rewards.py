@@ -82,3 +82,10 @@ def test_marker_speeds_and_contact_score():
     markers[0, :, 0, 2] = 0.15  # 10 cm above the threshold height
     expected = math.exp(-0.10) * math.exp(-(0.4 - 0.075))
     assert torch.allclose(contact_score(markers, 40.0), torch.tensor([expected, 1.0]), atol=1e-6)
+
+
+def test_skating_threshold_is_wandrs_speed_at_any_frame_rate():
+    from motion_envs.metrics import WANDR_SKATING_THRESHOLD, skating_threshold
+
+    assert skating_threshold(30) == pytest.approx(WANDR_SKATING_THRESHOLD)
+    assert skating_threshold(40) == pytest.approx(0.2 / 40)

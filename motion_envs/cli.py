@@ -47,6 +47,12 @@ def _bench_gamma(args: argparse.Namespace) -> int:
     return gamma_control(pairs=args.pairs, clones=args.clones, candidates=args.candidates, seed=args.seed, quick=args.quick)
 
 
+def _bench_render(args: argparse.Namespace) -> int:
+    from benchmarks.render_speed import main as render_speed
+
+    return render_speed()
+
+
 def _bench_gamma_realism(args: argparse.Namespace) -> int:
     from benchmarks.gamma_realism import main as gamma_realism
 
@@ -213,6 +219,9 @@ def parser() -> argparse.ArgumentParser:
     bench_gamma.add_argument("--candidates", type=int, default=16, help="latents tried per step by the greedy row")
     bench_gamma.add_argument("--seed", type=int, default=0)
     bench_gamma.set_defaults(run=_bench_gamma)
+    bench.add_parser("render", help="third-person rendering frames/s (benchmarks/results/throughput.md)").set_defaults(
+        run=_bench_render
+    )
     realism = bench.add_parser("gamma-realism", help="random-latent GAMMA motion vs the data: contact score, FS")
     _add_data_args(realism, ["cmu"])
     realism.add_argument("--rollouts", type=int, default=10, help="rollouts per shipped start pose")

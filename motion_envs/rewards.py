@@ -13,8 +13,11 @@ on the unsquared latent norm, goal term over a 10 m scale).
 Deviation, both configs: Eq. 9's r_goal is "added to all primitives of the
 sequence according to the closest distance of any primitive", which needs
 the future. An environment must pay as it goes, so r_goal here uses the
-closest distance *so far*; the sum over an episode is then a lower bound of
-the paper's. When the environment ends an episode on success, the
+closest distance *so far*, and the episode's last step pays the rest
+(`goal_settlement`): T · r_goal(closest of the episode) minus what was paid,
+so an episode's goal reward sums to the paper's (undiscounted). Without the
+settlement, getting close late earns almost nothing, and a policy learns to
+walk towards the goal slowly without reaching it. When the environment ends an episode on success, the
 remaining primitives are paid at the best per-step reward
 (`goal_absorbing_reward`), as if the body stayed at the goal: without it,
 ending an episode early would lose reward, and a policy would learn to
@@ -115,6 +118,12 @@ def goal_reward(closest_distance: torch.Tensor, scale: float, tolerance: float) 
     """Eq. 9 on the closest pelvis-goal ground distance so far (N,): 1 within `tolerance`, else ((L - d) / L)+."""
     return torch.where(closest_distance <= tolerance, torch.ones_like(closest_distance),
                        ((scale - closest_distance) / scale).clamp_min(0.0))  # fmt: skip
+
+
+def goal_settlement(steps: torch.Tensor, final_goal_reward: torch.Tensor, paid: torch.Tensor) -> torch.Tensor:
+    """Episode end: what makes the r_goal paid over `steps` (N,) primitives sum to steps · r_goal(closest),
+    given the last r_goal (N,) (of the episode's closest distance) and the sum `paid` (N,) so far."""
+    return steps.to(paid.dtype) * final_goal_reward - paid
 
 
 def goal_absorbing_reward(succeeded: torch.Tensor, remaining_steps: torch.Tensor, best_step_reward: float) -> torch.Tensor:

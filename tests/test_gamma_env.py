@@ -68,7 +68,7 @@ def test_reward_terms_lie_in_unit_interval_and_sum_to_the_reward(env):
         for name in ("path", "orientation", "contact", "pose_prior", "goal"):
             assert 0.0 <= terms[name] <= 1.0, name
         expected = sum(getattr(weights, name) * terms[name] for name in ("path", "orientation", "contact", "pose_prior", "goal"))
-        assert reward == pytest.approx(expected + terms["goal_absorbing"], rel=1e-5)
+        assert reward == pytest.approx(expected + weights.goal * terms["goal_settlement"] + terms["goal_absorbing"], rel=1e-5)
         assert 0.0 < info["contact_score"] <= 1.0
 
 
@@ -201,3 +201,14 @@ def test_start_bodies_stand_on_the_ground(env, body):
     posed = body(core.start_transl, core.start_orient, core.start_pose)
     lowest = body.skin(posed, foot_vertex_ids())[..., 2].amin(dim=-1)
     assert lowest.abs().max() < 1e-4
+
+
+def test_an_episodes_goal_reward_sums_to_the_papers(gamma):
+    env = GammaReachEnv(generator=gamma, max_primitives=4, terminate_on_goal=False)
+    env.reset(seed=8)
+    paid = 0.0
+    for z in _latents(4, 8):
+        _, _, _, truncated, info = env.step(z)
+        paid += info["reward_terms"]["goal"] + info["reward_terms"]["goal_settlement"]
+    assert truncated
+    assert paid == pytest.approx(4 * info["reward_terms"]["goal"], rel=1e-5)  # T · r_goal(closest of the episode)

@@ -89,3 +89,10 @@ def test_skating_threshold_is_wandrs_speed_at_any_frame_rate():
 
     assert skating_threshold(30) == pytest.approx(WANDR_SKATING_THRESHOLD)
     assert skating_threshold(40) == pytest.approx(0.2 / 40)
+
+
+def test_goal_settlement_completes_the_episode_sum():
+    from motion_envs.rewards import goal_settlement
+
+    settled = goal_settlement(torch.tensor([10]), torch.tensor([0.8]), torch.tensor([5.0]))
+    assert settled.item() == pytest.approx(3.0)

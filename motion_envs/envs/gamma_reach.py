@@ -28,10 +28,11 @@ frame; it fills both slots.
 
 GAMMA's Eq. 4 with the terms of `motion_envs.rewards` (each in [0, 1]),
 weights from `RewardConfig` (`reward="paper"` default, or `"release"`, the
-authors' code). Every term is in `info["reward_terms"]`. With
-`terminate_on_goal` (default) a successful step also earns the remaining
-primitives at the best per-step reward (`goal_absorbing`; see
-`motion_envs.rewards`).
+authors' code). Every term is in `info["reward_terms"]`. The last step of an
+episode also settles r_goal (`goal_settlement`) so that the episode's goal
+reward sums to Eq. 9's; with `terminate_on_goal` (default) a successful
+step also earns the remaining primitives at the best per-step reward
+(`goal_absorbing`; see `motion_envs.rewards`).
 
 ## Starting State
 
@@ -87,6 +88,7 @@ from motion_envs.rewards import (
     contact_reward,
     goal_absorbing_reward,
     goal_reward,
+    goal_settlement,
     orientation_reward,
     path_reward,
     pose_prior_reward,
@@ -125,12 +127,13 @@ class GammaReachConfig:
 @dataclasses.dataclass(frozen=True)
 class GammaReachState(BatchedState):
     """N bodies' simulation state. goal: (N, 3) on the ground. steps: (N,) primitives so far.
-    closest: (N,) closest pelvis-goal ground distance so far (m)."""
+    closest: (N,) closest pelvis-goal ground distance so far (m). goal_paid: (N,) r_goal paid so far."""
 
     seed: GammaSeed
     goal: torch.Tensor
     steps: torch.Tensor
     closest: torch.Tensor
+    goal_paid: torch.Tensor
 
 
 @dataclasses.dataclass(frozen=True)
@@ -185,7 +188,8 @@ class GammaReachCore:
         count = len(start_index)
         goal = torch.cat([goal_xy.to(torch.float32), torch.zeros(count, 1, device=self.device)], dim=1)
         distance = (goal_xy - transl[:, :2]).norm(dim=-1)
-        return GammaReachState(seed, goal, torch.zeros(count, dtype=torch.long, device=self.device), distance)
+        steps = torch.zeros(count, dtype=torch.long, device=self.device)
+        return GammaReachState(seed, goal, steps, distance, torch.zeros(count, device=self.device))
 
     def sample_initial_state(self, rngs: list[np.random.Generator], options: dict[str, Any] | None = None) -> GammaReachState:
         """One random start per generator (the single env has one; the vector env one per body).
@@ -245,12 +249,15 @@ class GammaReachCore:
         terminated = reached if config.terminate_on_goal else torch.zeros_like(reached)
         truncated = (steps >= config.max_primitives) & ~terminated
         reward = sum(getattr(weights, name) * value for name, value in terms.items())
+        paid = state.goal_paid + terms["goal"]
+        ended = terminated | truncated
+        terms["goal_settlement"] = torch.where(ended, goal_settlement(steps, terms["goal"], paid), torch.zeros_like(paid))
         remaining = (config.max_primitives - steps).to(reward.dtype)
         terms["goal_absorbing"] = goal_absorbing_reward(terminated, remaining, weights.best_step_reward)
-        reward = reward + terms["goal_absorbing"]
+        reward = reward + weights.goal * terms["goal_settlement"] + terms["goal_absorbing"]
         result = GammaStepResult(reward, terms, distance, reached, terminated, truncated,
                                  contact_score(primitive.markers, GAMMA_FPS), primitive)  # fmt: skip
-        return GammaReachState(next_seed, goal, steps, closest), result
+        return GammaReachState(next_seed, goal, steps, closest, paid), result
 
 
 def _step_info(result: GammaStepResult, state: GammaReachState, index: int) -> dict[str, Any]:

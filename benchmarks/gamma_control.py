@@ -125,7 +125,8 @@ def main(pairs: int = 100, clones: int = 32, candidates: int = 16, seed: int = 0
         "|---|---|---|---|---|---|---|",
     ]
     for name, row in rows.items():
-        lines.append(f"| {name} | {row['steps']:.1f} | {row['success rate']:.2f} | {row['avg. dist.']:.2f} | "
+        steps = "–" if np.isnan(row["steps"]) else f"{row['steps']:.1f}"  # no body reached its goal
+        lines.append(f"| {name} | {steps} | {row['success rate']:.2f} | {row['avg. dist.']:.2f} | "
                      f"{row['contact score']:.3f} | {row['FS']:.3f} | {seconds[name]:.0f} |")  # fmt: skip
     for name, (steps, success, distance, score) in PAPER_ROWS.items():
         lines.append(f"| {name} | {steps} | {success} | {distance} | {score} | | |")

@@ -32,7 +32,7 @@ from stable_baselines3.common.vec_env import VecMonitor, VecNormalize  # noqa: E
 from agents.ppo_kl import PAPER_SETTINGS, PPOKL  # noqa: E402
 from agents.vec_env import NativeVecEnv  # noqa: E402
 from motion_envs.atomic import atomic_write  # noqa: E402
-from motion_envs.priors.training import WEIGHTS_DIR  # noqa: E402
+from motion_envs.priors.training import WEIGHTS_DIR, record_in_manifest  # noqa: E402
 
 
 @dataclass
@@ -123,11 +123,7 @@ def train_ppo(config: PPOTrainConfig) -> dict:
     atomic_write(weights, model.save)
     entry = {"kind": "ppo_policy", "config": {k: str(v) if isinstance(v, Path) else v for k, v in asdict(config).items()},
              "timesteps": int(model.num_timesteps), "curve": curve, "torch": str(torch.__version__)}  # fmt: skip
-    manifest_path = weights.parent / "manifest.json"
-    manifest = json.loads(manifest_path.read_text()) if manifest_path.exists() else {}
-    manifest[weights.name] = entry
-    text = json.dumps(manifest, indent=2) + "\n"
-    atomic_write(manifest_path, lambda file: file.write(text.encode()))
+    record_in_manifest(weights, entry)
     plot_curve(curve, config.run_dir / "curve.png")
     return entry
 

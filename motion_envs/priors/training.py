@@ -140,12 +140,17 @@ def ship(model: nn.Module, weights: Path, entry: dict[str, Any]) -> dict[str, An
     half = {name: value.half() if value.is_floating_point() else value for name, value in model.state_dict().items()}
     entry = {**entry, "torch": str(torch.__version__)}
     save_checkpoint(weights, {**entry, "model": half})
+    record_in_manifest(weights, entry)
+    return entry
+
+
+def record_in_manifest(weights: Path, entry: dict[str, Any]) -> None:
+    """Set `entry` as the record of `weights` in the `manifest.json` beside it (written atomically)."""
     manifest_path = weights.parent / "manifest.json"
     manifest = json.loads(manifest_path.read_text()) if manifest_path.exists() else {}
     manifest[weights.name] = entry
     text = json.dumps(manifest, indent=2) + "\n"
     atomic_write(manifest_path, lambda file: file.write(text.encode()))
-    return entry
 
 
 Module = TypeVar("Module", bound=nn.Module)

@@ -26,7 +26,7 @@ avoid the goal.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, replace
 
 import torch
 
@@ -61,12 +61,20 @@ class RewardConfig:
         return cls(orientation=0.5, goal_scale=10.0, contact_speed_power=1.0, central_difference=True, pose_prior_power=1.0)
 
     @classmethod
-    def named(cls, name: str) -> RewardConfig:
-        """'paper' or 'release'."""
+    def named(cls, spec: str) -> RewardConfig:
+        """'paper' or 'release', optionally with fields changed: 'paper:goal=5,orientation=0.5'."""
         configs = {"paper": cls.paper, "release": cls.release}
+        name, _, changes = spec.partition(":")
         if name not in configs:
-            raise ValueError(f"unknown reward config {name!r}; choose from {sorted(configs)}")
-        return configs[name]()
+            raise ValueError(f"unknown reward config {name!r}; choose from {sorted(configs)} (then :field=value,...)")
+        config = configs[name]()
+        for change in filter(None, changes.split(",")):
+            field, _, value = change.partition("=")
+            if field not in {f.name for f in fields(cls)} or not value:
+                raise ValueError(f"bad reward change {change!r} in {spec!r}; fields: {[f.name for f in fields(cls)]}")
+            kind = type(getattr(config, field))
+            config = replace(config, **{field: value.lower() in ("1", "true") if kind is bool else kind(value)})
+        return config
 
     @property
     def best_step_reward(self) -> float:

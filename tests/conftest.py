@@ -32,3 +32,14 @@ def mocap_dir() -> Path:
 @pytest.fixture
 def generator() -> torch.Generator:
     return torch.Generator().manual_seed(0)
+
+
+@pytest.fixture(scope="session")
+def walking_clips(mocap_dir, body):
+    """One real CMU walking clip (07_01) as 40 fps markers."""
+    from motion_envs.data.build import find_sources, load_clip
+    from motion_envs.data.primitives import MarkerClips
+    from motion_envs.data.retarget import RetargetConfig
+
+    source = next(s for s in find_sources(mocap_dir) if s.relative == "cmu/07_01.bvh")
+    return MarkerClips.from_motions([load_clip(source, 40, body, RetargetConfig(iterations=60))], body)

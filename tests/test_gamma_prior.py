@@ -5,9 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from motion_envs.data.build import find_sources, load_clip
-from motion_envs.data.primitives import PRIMITIVE_FRAMES, MarkerClips
-from motion_envs.data.retarget import RetargetConfig
+from motion_envs.data.primitives import PRIMITIVE_FRAMES
 from motion_envs.priors.canonical import canonical_frame, to_canonical, to_world
 from motion_envs.priors.gamma import (
     BodyRegressor,
@@ -21,12 +19,6 @@ from motion_envs.priors.gamma import (
 )
 from motion_envs.body.markers import marker_ids
 from motion_envs.priors.train_regressor import regressor_loss
-
-
-@pytest.fixture(scope="module")
-def walking_clips(mocap_dir, body) -> MarkerClips:
-    source = next(s for s in find_sources(mocap_dir) if s.relative == "cmu/07_01.bvh")
-    return MarkerClips.from_motions([load_clip(source, 40, body, RetargetConfig(iterations=60))], body)
 
 
 def test_canonical_frame_round_trip_and_axes(generator):

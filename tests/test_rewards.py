@@ -96,3 +96,15 @@ def test_goal_settlement_completes_the_episode_sum():
 
     settled = goal_settlement(torch.tensor([10]), torch.tensor([0.8]), torch.tensor([5.0]))
     assert settled.item() == pytest.approx(3.0)
+
+
+def test_reward_specs_change_named_fields_and_refuse_unknown_ones():
+    from motion_envs.rewards import RewardConfig
+
+    changed = RewardConfig.named("release:goal=5,central_difference=false")
+    assert changed.goal == 5.0 and changed.central_difference is False and changed.orientation == 0.5
+    assert changed.best_step_reward == RewardConfig.release().best_step_reward + 4.0
+    with pytest.raises(ValueError, match="bad reward change 'speed=1'"):
+        RewardConfig.named("paper:speed=1")
+    with pytest.raises(ValueError, match="unknown reward config 'papers'"):
+        RewardConfig.named("papers")

@@ -81,7 +81,7 @@ from motion_envs.data.primitives import GAMMA_FPS
 from motion_envs.data.start_poses import load_start_poses
 from motion_envs.envs.core import check_actions, config_from_kwargs
 from motion_envs.metrics import contact_score, marker_speeds
-from motion_envs.priors.canonical import PELVIS, canonical_frame, to_canonical
+from motion_envs.priors.canonical import PELVIS, goal_observation
 from motion_envs.priors.gamma_generator import GammaGenerator, GammaSeed, Primitive
 from motion_envs.rewards import (
     RewardConfig,
@@ -218,18 +218,13 @@ class GammaReachCore:
         """(N, 804): per seed frame, canonical markers and unit marker-to-goal vectors (Eq. 3)."""
         seed = state.seed
         bodies = torch.arange(seed.num_bodies, device=self.device)
-        frame = canonical_frame(seed.joints[bodies, 2 - seed.seed_frames])
-        markers = to_canonical(seed.markers.flatten(1, 2), frame).unflatten(1, (2, -1))  # (N, 2, 67, 3)
-        goal = to_canonical(state.goal[:, None], frame)[:, None]  # (N, 1, 1, 3)
-        towards = goal - markers
-        towards = towards / towards.norm(dim=-1, keepdim=True).clamp_min(1e-8)
-        return torch.cat([markers, towards], dim=-1).flatten(1)
+        return goal_observation(seed.markers, seed.joints[bodies, 2 - seed.seed_frames], state.goal)
 
     def step(self, state: GammaReachState, z: torch.Tensor) -> tuple[GammaReachState, GammaStepResult]:
         """Generate one primitive per body from latents z (N, 128) and score it."""
         config, weights = self.config, self.config.reward
         z = z.to(self.device, torch.float32).clamp(-config.latent_bound, config.latent_bound)
-        primitive, next_seed = self.generator.step(state.seed, z)
+        primitive, next_seed = self.generator.step(state.seed, z, state.goal)
         joints, goal = primitive.joints, state.goal
         pelvis_start, pelvis_end = joints[:, 0, PELVIS], joints[:, -1, PELVIS]
         distance = (pelvis_end[:, :2] - goal[:, :2]).norm(dim=-1)

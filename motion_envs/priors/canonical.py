@@ -42,3 +42,14 @@ def to_canonical(points: torch.Tensor, frame: CanonicalFrame) -> torch.Tensor:
 def to_world(points: torch.Tensor, frame: CanonicalFrame) -> torch.Tensor:
     """(..., P, 3) canonical points -> world coordinates."""
     return points @ frame.rotation.transpose(-1, -2) + frame.origin[..., None, :]
+
+
+def goal_observation(seed_markers: torch.Tensor, first_seed_joints: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
+    """Eq. 3's state: seed markers (N, 2, 67, 3), the first seed frame's joints (N, 22, 3) and goals (N, 3),
+    all in one frame (world or not) -> (N, 804): per seed frame, markers and unit marker-to-goal vectors in
+    the canonical frame of the first seed frame."""
+    frame = canonical_frame(first_seed_joints)
+    markers = to_canonical(seed_markers.flatten(1, 2), frame).unflatten(1, (2, -1))  # (N, 2, 67, 3)
+    towards = to_canonical(goal[:, None], frame)[:, None] - markers
+    towards = towards / towards.norm(dim=-1, keepdim=True).clamp_min(1e-8)
+    return torch.cat([markers, towards], dim=-1).flatten(1)

@@ -44,7 +44,13 @@ def _bench_data(args: argparse.Namespace) -> int:
 def _bench_gamma(args: argparse.Namespace) -> int:
     from benchmarks.gamma_control import main as gamma_control
 
-    return gamma_control(pairs=args.pairs, clones=args.clones, candidates=args.candidates, seed=args.seed, quick=args.quick)
+    return gamma_control(pairs=args.pairs, clones=args.clones, seed=args.seed, quick=args.quick, bf16=args.bf16)
+
+
+def _bench_speed(args: argparse.Namespace) -> int:
+    from benchmarks.throughput import main as throughput
+
+    return throughput()
 
 
 def _bench_render(args: argparse.Namespace) -> int:
@@ -63,7 +69,7 @@ def _bench_gamma_realism(args: argparse.Namespace) -> int:
 def _play(args: argparse.Namespace) -> int:
     from motion_envs.play import play
 
-    for summary in play(args.env_id, args.policy, args.baseline, args.video, args.seed, args.episodes, args.every):
+    for summary in play(args.env_id, args.policy, args.baseline, args.video, args.seed, args.episodes, args.every, args.search):
         print(" ".join(f"{name}={value}" for name, value in summary.items()))
     if args.video:
         print(f"video: {args.video}")
@@ -74,12 +80,22 @@ def _train_ppo(args: argparse.Namespace) -> int:
     from agents.train_ppo import PPOTrainConfig, train_ppo
 
     given = {"env_id": args.env, "reward": args.reward, "alpha": args.alpha, "num_envs": args.num_envs,
-             "total_timesteps": args.timesteps, "run_dir": args.run_dir, "weights": args.weights, "seed": args.seed}  # fmt: skip
+             "total_timesteps": args.timesteps, "run_dir": args.run_dir, "weights": args.weights, "seed": args.seed,
+             "init": args.init, "log_std_init": args.log_std_init, "learning_rate": args.learning_rate,
+             "n_steps": args.n_steps}  # fmt: skip
     config = PPOTrainConfig(command="motion-envs " + " ".join(sys.argv[1:]),
                             **{name: value for name, value in given.items() if value is not None})  # fmt: skip
     if config.run_dir == PPOTrainConfig.run_dir:
         config.run_dir = Path(f"runs/{config.weights_path().stem}")
-    entry = train_ppo(config)
+    clone_from = None
+    if config.init == "data" and not (config.run_dir / "model.zip").exists():
+        if "GammaReach" not in config.env_id:
+            print(f"--init data clones GAMMA latents; use --init scratch for {config.env_id}", file=sys.stderr)
+            return 2
+        from motion_envs.data.goal_windows import goal_windows
+
+        clone_from = goal_windows(_marker_clips(_gamma_dataset(args), "train", mirrored=True))
+    entry = train_ppo(config, clone_from)
     last = entry["curve"][-1] if entry["curve"] else {}
     print(f"{entry['timesteps']} steps; latest success rate {last.get('success_rate', float('nan')):.2f}; "
           f"weights {config.weights_path()}")
@@ -91,25 +107,31 @@ def _train(args: argparse.Namespace) -> int:
         return _train_ppo(args)
     if args.what != "gamma":
         return _not_yet(f"train {args.what}")(args)
-    stages = {"predictor": _train_gamma_predictor, "regressor": _train_gamma_regressor, "pose-vae": _train_gamma_pose_vae}
+    stages = {"predictor": _train_gamma_predictor, "regressor": _train_gamma_regressor, "pose-vae": _train_gamma_pose_vae,
+              "g-cvae": _train_gamma_g_cvae}  # fmt: skip
     if args.stage not in stages:
         print(f"unknown --stage {args.stage!r}; choose from {', '.join(stages)}", file=sys.stderr)
         return 2
-    from motion_envs.data.build import build
-    from motion_envs.data.dataset import MotionDataset
-    from motion_envs.data.primitives import GAMMA_FPS
-
-    report = build(mocap_dir=args.mocap_dir, cache_dir=args.cache_dir, subsets=tuple(args.subset), fps_list=(GAMMA_FPS,))
-    dataset = MotionDataset.load(report.caches[GAMMA_FPS])
+    dataset = _gamma_dataset(args)
     given = {"epochs": args.epochs, "batch_size": args.batch_size, "run_dir": args.run_dir, "weights": args.weights,
              "window_stride": args.window_stride, "rollout_epochs": args.rollout_epochs}  # fmt: skip
-    common = {"data_hash": report.caches[GAMMA_FPS].stem, "command": "motion-envs " + " ".join(sys.argv[1:]),
+    common = {"data_hash": dataset.path.stem, "command": "motion-envs " + " ".join(sys.argv[1:]),
               **{name: value for name, value in given.items() if value is not None}}  # fmt: skip
     entry = stages[args.stage](args, dataset, common)
     for name, value in entry.items():
         if name.startswith("validation"):
             print(f"{name}: {json.dumps(value)}")
     return 0
+
+
+def _gamma_dataset(args: argparse.Namespace):
+    """The 40 fps motion cache (built from the mocap folder if it is missing)."""
+    from motion_envs.data.build import build
+    from motion_envs.data.dataset import MotionDataset
+    from motion_envs.data.primitives import GAMMA_FPS
+
+    report = build(mocap_dir=args.mocap_dir, cache_dir=args.cache_dir, subsets=tuple(args.subset), fps_list=(GAMMA_FPS,))
+    return MotionDataset.load(report.caches[GAMMA_FPS])
 
 
 def _train_config(config_type: type, common: dict, **extra):
@@ -141,6 +163,16 @@ def _train_gamma_regressor(args: argparse.Namespace, dataset, common: dict) -> d
 
     config = _train_config(RegressorTrainConfig, common)
     return train_regressor(config, _marker_clips(dataset, "train", mirrored=True), _marker_clips(dataset, "validation"))
+
+
+def _train_gamma_g_cvae(args: argparse.Namespace, dataset, common: dict) -> dict:
+    from baselines.g_cvae import GoalCVAETrainConfig, train_goal_cvae
+    from motion_envs.data.goal_windows import goal_windows
+
+    def windows(split: str, mirrored: bool):
+        return goal_windows(_marker_clips(dataset, split, mirrored=mirrored))
+
+    return train_goal_cvae(_train_config(GoalCVAETrainConfig, common), windows("train", True), windows("validation", False))
 
 
 def _train_gamma_pose_vae(args: argparse.Namespace, dataset, common: dict) -> dict:
@@ -189,7 +221,7 @@ def parser() -> argparse.ArgumentParser:
 
     train = commands.add_parser("train", help="train a prior or a policy (resumable: rerun the same command)")
     train.add_argument("what", help="gamma | ppo | wandr | clops | dqn (gamma and ppo so far)")
-    train.add_argument("--stage", default="predictor", help="gamma: predictor | regressor | pose-vae")
+    train.add_argument("--stage", default="predictor", help="gamma: predictor | regressor | pose-vae | g-cvae")
     train.add_argument("--seed-frames", type=int, default=2, choices=(1, 2), help="predictor: seed frames")
     train.add_argument("--epochs", type=int, default=None, help="epochs (predictor: single-primitive epochs)")
     train.add_argument("--rollout-epochs", type=int, default=None, help="predictor: 8-primitive rollout epochs after those")
@@ -202,6 +234,11 @@ def parser() -> argparse.ArgumentParser:
     train.add_argument("--alpha", type=float, default=None, help="ppo: weight of the KL-to-prior regulariser (paper: 1, 10)")
     train.add_argument("--num-envs", type=int, default=None, help="ppo: bodies stepped together")
     train.add_argument("--timesteps", type=int, default=None, help="ppo: total env steps (primitives)")
+    train.add_argument("--init", choices=("data", "scratch"), default=None,
+                       help="ppo: start the actor from the data's latents (default) or from scratch")
+    train.add_argument("--log-std-init", type=float, default=None, help="ppo: initial log sigma of the policy (default -1)")
+    train.add_argument("--learning-rate", type=float, default=None, help="ppo: Adam learning rate")
+    train.add_argument("--n-steps", type=int, default=None, help="ppo: primitives per body per rollout")
     train.add_argument("--seed", type=int, default=None)
     _add_data_args(train, ["cmu"])
     train.set_defaults(run=_train)
@@ -213,12 +250,15 @@ def parser() -> argparse.ArgumentParser:
     _add_data_args(bench_data, ["cmu"])
     bench_data.set_defaults(run=_bench_data)
     bench_gamma = bench.add_parser("gamma", help="GAMMA goal reaching (Table 1 protocol) with the shipped weights")
-    bench_gamma.add_argument("--quick", action="store_true", help="20 pairs x 4 clones, best-of-8: a few minutes")
+    bench_gamma.add_argument("--quick", action="store_true", help="20 pairs x 8 clones: a few minutes")
     bench_gamma.add_argument("--pairs", type=int, default=100)
     bench_gamma.add_argument("--clones", type=int, default=32)
-    bench_gamma.add_argument("--candidates", type=int, default=16, help="latents tried per step by the greedy row")
+    bench_gamma.add_argument("--bf16", action="store_true", help="add a row with the prior's networks in bf16")
     bench_gamma.add_argument("--seed", type=int, default=0)
     bench_gamma.set_defaults(run=_bench_gamma)
+    bench.add_parser("speed", help="GAMMA rollout body-primitives/s by batch, fp32 and bf16 (throughput.md)").set_defaults(
+        run=_bench_speed
+    )
     bench.add_parser("render", help="third-person rendering frames/s (benchmarks/results/throughput.md)").set_defaults(
         run=_bench_render
     )
@@ -237,6 +277,7 @@ def parser() -> argparse.ArgumentParser:
     play.add_argument("--seed", type=int, default=0)
     play.add_argument("--episodes", type=int, default=1)
     play.add_argument("--every", type=int, default=2, help="keep every n-th frame in the video (40 fps / n)")
+    play.add_argument("--search", type=int, default=None, metavar="K", help="play a tree search's branch (K kept per level)")
     play.set_defaults(run=_play)
     return root
 

@@ -48,14 +48,23 @@ class MarkerCVAEConfig:
     hidden: int = 256
     latent: int = 128
     mlp: tuple[int, ...] = (512, 256)
+    goal_features: bool = False
+    """GAMMA's g-CVAE baseline: every seed frame also carries the unit vectors from its markers to the goal
+    (Eq. 3's goal features; `goal_conditioned_seed`), 402 values per frame instead of 201."""
 
     @property
     def future_frames(self) -> int:
         return PRIMITIVE_FRAMES - self.seed_frames
 
+    @property
+    def seed_dim(self) -> int:
+        return 2 * MARKER_DIM if self.goal_features else MARKER_DIM
+
 
 class MarkerCVAE(nn.Module):
-    """Marker predictor: seed (B, S, 201) + z (B, 128) -> future (B, 10 - S, 201)."""
+    """Marker predictor: seed (B, S, 201) + z (B, 128) -> future (B, 10 - S, 201).
+
+    With `goal_features` the seed is (B, S, 402): markers, then marker-to-goal unit vectors."""
 
     def __init__(self, config: MarkerCVAEConfig = MarkerCVAEConfig()) -> None:
         super().__init__()
@@ -63,7 +72,7 @@ class MarkerCVAE(nn.Module):
             raise ValueError(f"seed_frames must be 1 or 2, got {config.seed_frames}")
         self.config = config
         hidden, latent = config.hidden, config.latent
-        self.seed_encoder = nn.GRU(MARKER_DIM, hidden, batch_first=True)
+        self.seed_encoder = nn.GRU(config.seed_dim, hidden, batch_first=True)
         self.future_encoder = nn.GRU(MARKER_DIM, hidden, batch_first=True)
         self.posterior = tanh_mlp([2 * hidden, *config.mlp])
         self.mean = nn.Linear(config.mlp[-1], latent)
@@ -73,8 +82,8 @@ class MarkerCVAE(nn.Module):
         self.readout = nn.Sequential(tanh_mlp([hidden, *config.mlp]), nn.Linear(config.mlp[-1], MARKER_DIM))
 
     def seed_state(self, seed: torch.Tensor) -> torch.Tensor:
-        """(B, S, 201) -> (B, hidden) final GRU state of the seed."""
-        self._check(seed, self.config.seed_frames, "seed")
+        """(B, S, 201 | 402) -> (B, hidden) final GRU state of the seed."""
+        self._check(seed, self.config.seed_frames, "seed", self.config.seed_dim)
         return self.seed_encoder(seed)[1][0]
 
     def encode(self, seed: torch.Tensor, future: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -85,10 +94,10 @@ class MarkerCVAE(nn.Module):
         return self.mean(hidden), self.log_variance(hidden)
 
     def decode(self, seed: torch.Tensor, z: torch.Tensor) -> torch.Tensor:
-        """(B, S, 201) seed and (B, latent) z -> (B, 10 - S, 201) predicted markers."""
+        """(B, S, 201 | 402) seed and (B, latent) z -> (B, 10 - S, 201) predicted markers."""
         context = self.seed_state(seed)
         state = self.initial_state(context)
-        previous = seed[:, -1]
+        previous = seed[:, -1, :MARKER_DIM]
         frames = []
         for _ in range(self.config.future_frames):  # 8 or 9 steps of one primitive, batched over bodies
             state = self.cell(torch.cat([context, z, previous], dim=-1), state)
@@ -102,9 +111,16 @@ class MarkerCVAE(nn.Module):
         z = mean + torch.randn_like(mean) * torch.exp(0.5 * log_variance)
         return self.decode(seed, z), mean, log_variance
 
-    def _check(self, frames: torch.Tensor, count: int, name: str) -> None:
-        if frames.ndim != 3 or frames.shape[1:] != (count, MARKER_DIM):
-            raise ValueError(f"{name} must be (B, {count}, {MARKER_DIM}), got {tuple(frames.shape)}")
+    def _check(self, frames: torch.Tensor, count: int, name: str, size: int = MARKER_DIM) -> None:
+        if frames.ndim != 3 or frames.shape[1:] != (count, size):
+            raise ValueError(f"{name} must be (B, {count}, {size}), got {tuple(frames.shape)}")
+
+
+def goal_conditioned_seed(observation: torch.Tensor) -> torch.Tensor:
+    """The environment's state (B, 804) (`goal_observation`: per seed frame, 67 × (marker, unit vector to the
+    goal)) -> the g-CVAE's seed (B, 2, 402): per frame, the 201 marker values, then the 201 goal-vector values."""
+    per_marker = observation.unflatten(-1, (2, NUM_MARKERS, 6))
+    return torch.cat([per_marker[..., :3].flatten(-2), per_marker[..., 3:].flatten(-2)], dim=-1)
 
 
 def kl_to_standard_normal(mean: torch.Tensor, log_variance: torch.Tensor) -> torch.Tensor:

@@ -4,6 +4,8 @@ Every generated frame (not only one per step) goes into the video, so it
 shows what the body did at the prior's own frame rate (40 fps, `--every 2`
 keeps every other frame). The summary line per episode: success, steps,
 final distance, contact score (GAMMA Eq. 11) and foot skating (WANDR's, 0.2 m/s).
+`--search K` plays the branch a tree search (16 roots, 4 children, K kept;
+`motion_envs.wrappers.tree_search`) found with the controller as proposal.
 """
 
 from __future__ import annotations
@@ -43,8 +45,9 @@ def controller_for(policy: Path | None, baseline: str | None, seed: int) -> Call
 
 
 def play(env_id: str, policy: Path | None = None, baseline: str | None = None, video: Path | None = None,
-         seed: int = 0, episodes: int = 1, every: int = 2, **env_kwargs) -> list[dict]:  # fmt: skip
-    """Run `episodes` episodes; returns their summaries (and writes `video` when given). `env_kwargs` go to the env."""
+         seed: int = 0, episodes: int = 1, every: int = 2, search: int | None = None, **env_kwargs) -> list[dict]:  # fmt: skip
+    """Run `episodes` episodes; returns their summaries (and writes `video` when given). `env_kwargs` go to the env;
+    `search` (K kept per level) plays tree-search branches instead of the controller's own latents."""
     if env_id != "motion_envs/GammaReach-v0":
         raise ValueError(f"play supports motion_envs/GammaReach-v0 so far, got {env_id!r}")
     if every < 1:
@@ -56,7 +59,7 @@ def play(env_id: str, policy: Path | None = None, baseline: str | None = None, v
     summaries = []
     try:
         for episode in range(episodes):
-            summaries.append(_episode(env, controller, renderer, writer, seed + episode, every))
+            summaries.append(_episode(env, controller, renderer, writer, seed + episode, every, search))
     finally:
         if writer is not None:
             writer.close()
@@ -64,14 +67,19 @@ def play(env_id: str, policy: Path | None = None, baseline: str | None = None, v
 
 
 def _episode(env: GammaReachEnv, controller: Callable, renderer: ThirdPersonRenderer | None, writer, seed: int,
-             every: int) -> dict:  # fmt: skip
+             every: int, search: int | None) -> dict:  # fmt: skip
     env.reset(seed=seed)
+    plan = None
+    if search is not None:
+        from motion_envs.wrappers.tree_search import SearchSettings, beam_search
+
+        plan = beam_search(env.core, env.state, controller, SearchSettings(keep=search)).latents[0]
     body, feet_ids = env.core.generator.body, foot_vertex_ids()
     feet, contact, trail = [], [], [env.trail[0]]
     info: dict = {}
     steps = 0
     for steps in range(1, env.config.max_primitives + 1):
-        z = controller(env.core, env.state)[0].numpy()
+        z = (controller(env.core, env.state)[0] if plan is None else plan[steps - 1]).numpy()
         _, _, terminated, truncated, info = env.step(z)
         primitive = env.last_primitive
         new = primitive.new_frames()[0]

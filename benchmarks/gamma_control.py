@@ -1,19 +1,28 @@
-"""GAMMA's goal-reaching benchmark (`motion-envs bench gamma`), the paper's Table 1 protocol.
+"""GAMMA's goal-reaching benchmark (`motion-envs bench gamma`): the paper's Table 1 protocol.
 
 Fixed body-goal pairs (seeded): a shipped start pose facing a random way in
-the middle of a 20 × 20 m ground, a goal uniform on it. Each pair is run
-with `clones` copies for up to 60 primitives by each controller, all bodies
-in one batch of the GammaReach core. Per controller:
+the middle of a 20 × 20 m ground, a goal uniform on it. As in the paper
+(Sec. 4.2), each pair's body is cloned `clones` times and all clones move at
+once; a pair's simulation ends when any clone reaches the goal (0.75 m) or
+after 60 primitives. Per row:
 
-* steps: primitives until the goal is reached (0.75 m), over successful bodies;
-* success rate: bodies that reach the goal;
-* avg. dist.: ground distance pelvis-goal when the episode ends (reached or not);
+* steps: primitives until the first clone reached the goal (successful pairs);
+* success rate: pairs where any clone reached the goal;
+* avg. dist.: pelvis-goal ground distance of all clones when the pair ends;
 * contact score: GAMMA Eq. 11 over every generated primitive;
 * FS: WANDR's foot skating at 40 fps with its 0.2 m/s threshold.
 
-`--quick` (the README's main job) runs fewer pairs and clones. Writes
+Tree-search rows ("& topK", `motion_envs.wrappers.tree_search`) run one
+search per pair (16 roots, 4 children per node, K kept); their "clones" are
+the K kept nodes: avg. dist. is the kept nodes' mean when the search ends,
+and contact score and FS are those of the chosen branch, replayed.
+
+Rows: random z, each shipped GammaReach policy (sampled latents, as the
+paper), the α = 10 policy with top-1 and top-4 search, and the α = 10
+policy with the prior run in bf16 (`GammaGenerator.set_precision`). `--quick`
+(the README's main job) runs fewer pairs and clones. Writes
 `benchmarks/results/gamma_control.md` (or `gamma_control_quick.md`) and a
-top-down plot of one clone per pair.
+top-down plot of the first clone (or chosen branch) per pair.
 """
 
 from __future__ import annotations
@@ -31,15 +40,17 @@ import torch  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
 from agents.controllers import PolicyLatent  # noqa: E402
-from baselines.latent_controllers import GreedyLatent, RandomLatent  # noqa: E402
+from baselines.latent_controllers import RandomLatent  # noqa: E402
 from benchmarks.machine import machine_line  # noqa: E402
 from motion_envs.atomic import atomic_write  # noqa: E402
 from motion_envs.body.markers import foot_vertex_ids  # noqa: E402
 from motion_envs.data.primitives import GAMMA_FPS  # noqa: E402
-from motion_envs.envs.gamma_reach import GammaReachConfig, GammaReachCore, GammaReachState  # noqa: E402
+from motion_envs.envs.gamma_reach import GammaReachConfig, GammaReachCore, GammaReachState, GammaStepResult  # noqa: E402
 from motion_envs.metrics import foot_skating, skating_threshold  # noqa: E402
 from motion_envs.priors.canonical import PELVIS  # noqa: E402
+from motion_envs.priors.gamma_generator import GammaGenerator  # noqa: E402
 from motion_envs.priors.training import WEIGHTS_DIR  # noqa: E402
+from motion_envs.wrappers.tree_search import SearchSettings, beam_search  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 PAPER_ROWS = {  # GAMMA Table 1: steps, success rate, avg. dist., contact score
@@ -52,74 +63,119 @@ PAPER_ROWS = {  # GAMMA Table 1: steps, success rate, avg. dist., contact score
 Controller = Callable[[GammaReachCore, GammaReachState], torch.Tensor]
 
 
-def fixed_pairs(core: GammaReachCore, pairs: int, clones: int, seed: int) -> GammaReachState:
-    """`pairs` seeded body-goal pairs, each repeated `clones` times (clones of a pair are adjacent)."""
+def fixed_pairs(core: GammaReachCore, pairs: int, seed: int) -> GammaReachState:
+    """`pairs` seeded body-goal pairs."""
     rngs = [np.random.default_rng([seed, pair]) for pair in range(pairs)]
-    return core.sample_initial_state(rngs).repeat(clones)
+    return core.sample_initial_state(rngs)
+
+
+class Recorder:
+    """Contact score, foot skating and the pelvis path of the primitives a row generates."""
+
+    def __init__(self, core: GammaReachCore, start: GammaReachState, horizon: int) -> None:
+        self.body, self.feet_ids = core.generator.body, foot_vertex_ids()
+        self.contact: list[torch.Tensor] = []
+        self.skating: list[torch.Tensor] = []
+        self.paths = torch.full((start.num_bodies, horizon + 1, 2), float("nan"))  # pelvis after every primitive
+        self.paths[:, 0] = start.seed.joints[:, -1, PELVIS, :2]
+
+    def add(self, step: int, result: GammaStepResult, rows: torch.Tensor, every: int = 1) -> None:
+        """The primitives of `step`; every `every`-th body's path goes to path `rows`."""
+        primitive = result.primitive
+        self.contact.append(result.contact_score)
+        feet = self.body.skin(self.body(primitive.transl, primitive.global_orient, primitive.body_pose), self.feet_ids)
+        first = 0 if step == 0 else 1  # transitions from the last seed frame on (start pose: 1-frame seed)
+        self.skating.append(foot_skating(feet[:, first:], skating_threshold(GAMMA_FPS)).float().flatten())
+        self.paths[rows, step + 1] = primitive.joints[::every, -1, PELVIS, :2].cpu()
+
+    def row(self, steps: torch.Tensor, reached: torch.Tensor, distance: torch.Tensor) -> dict:
+        return {
+            "steps": float(steps[reached].float().mean()) if reached.any() else float("nan"),
+            "success rate": float(reached.float().mean()),
+            "avg. dist.": float(distance.mean()),
+            "contact score": float(torch.cat(self.contact).mean()),
+            "FS": float(torch.cat(self.skating).mean()),
+            "paths": self.paths.numpy(),
+        }
 
 
 @torch.no_grad()
-def run_controller(core: GammaReachCore, state: GammaReachState, controller: Controller) -> dict:
-    """Run every body to its episode end; finished bodies leave the batch."""
-    count, horizon = state.num_bodies, core.config.max_primitives
-    steps_taken = torch.zeros(count, dtype=torch.long)
-    final_distance = torch.zeros(count)
-    reached = torch.zeros(count, dtype=torch.bool)
-    paths = torch.full((count, horizon + 1, 2), float("nan"))  # pelvis at the end of every primitive
-    paths[:, 0] = state.seed.joints[:, -1, PELVIS, :2]
-    contact, skating = [], []
-    active = torch.arange(count)
-    body, feet_ids = core.generator.body, foot_vertex_ids()
+def run_clones(core: GammaReachCore, start: GammaReachState, controller: Controller, clones: int) -> dict:
+    """The paper's protocol: `clones` copies of every pair move together until one reaches the goal."""
+    pairs, horizon = start.num_bodies, core.config.max_primitives
+    state = start.repeat(clones)  # clones of a pair are adjacent rows
+    recorder = Recorder(core, start, horizon)
+    steps, reached, distance = torch.zeros(pairs, dtype=torch.long), torch.zeros(pairs, dtype=torch.bool), torch.zeros(pairs)
+    live = torch.arange(pairs)
     for step in tqdm(range(horizon), desc="primitives", leave=False):
         state, result = core.step(state, controller(core, state))
-        primitive = result.primitive
-        contact.append(result.contact_score)
-        feet = body.skin(body(primitive.transl, primitive.global_orient, primitive.body_pose), feet_ids)
-        first = 0 if step == 0 else 1  # transitions from the last seed frame on (start pose: 1-frame seed)
-        skating.append(foot_skating(feet[:, first:], skating_threshold(GAMMA_FPS)).float().flatten())
-        paths[active, step + 1] = primitive.joints[:, -1, PELVIS, :2]
-        done = result.terminated | result.truncated
-        ended = active[done]
-        steps_taken[ended], final_distance[ended], reached[ended] = state.steps[done], result.distance[done], result.reached[done]
-        if done.all():
+        recorder.add(step, result, live, every=clones)
+        arrived = result.reached.reshape(len(live), clones).any(dim=1).cpu()
+        over = arrived | (step == horizon - 1)
+        ended = live[over]
+        steps[ended], reached[ended] = step + 1, arrived[over]
+        distance[ended] = result.distance.reshape(len(live), clones).mean(dim=1).cpu()[over]
+        if over.all():
             break
-        state, active = state.index(~done), active[~done]
-    return {
-        "steps": float(steps_taken[reached].float().mean()) if reached.any() else float("nan"),
-        "success rate": float(reached.float().mean()),
-        "avg. dist.": float(final_distance.mean()),
-        "contact score": float(torch.cat(contact).mean()),
-        "FS": float(torch.cat(skating).mean()),
-        "paths": paths.numpy(),
-    }
+        keep = (~over).repeat_interleave(clones)
+        state, live = state.index(keep.to(state.steps.device)), live[~over]
+    return recorder.row(steps, reached, distance)
 
 
-def main(pairs: int = 100, clones: int = 32, candidates: int = 16, seed: int = 0, quick: bool = False) -> int:
+@torch.no_grad()
+def run_search(core: GammaReachCore, start: GammaReachState, proposal: Controller, settings: SearchSettings) -> dict:
+    """One tree search per pair; the chosen branches replayed for contact score, FS and paths."""
+    found = beam_search(core, start, proposal, settings)
+    recorder = Recorder(core, start, core.config.max_primitives)
+    state, live = start, torch.arange(start.num_bodies)
+    for level in range(found.latents.shape[1]):
+        state, result = core.step(state, found.latents[live, level])
+        recorder.add(level, result, live)
+        going = found.length[live] > level + 1
+        state, live = state.index(going.to(state.steps.device)), live[going]
+    return recorder.row(found.length, found.reached, found.spread)
+
+
+def policy_label(path: Path) -> str:
+    """ppo_gammareach_alpha10_paper.zip -> "policy(10)"; another reward is named: "policy(10), release reward"."""
+    alpha, _, reward = path.stem.removeprefix("ppo_gammareach_alpha").partition("_")
+    return f"policy({alpha})" + ("" if reward == "paper" else f", {reward} reward")
+
+
+def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False, bf16: bool = False) -> int:
     if quick:
-        pairs, clones, candidates = 20, 4, 8
+        pairs, clones = 20, 8
     began = time.perf_counter()
     core = GammaReachCore(GammaReachConfig())
-    controllers: dict[str, Controller] = {
-        "random z": RandomLatent(seed),
-        f"greedy best-of-{candidates} by reward": GreedyLatent(candidates, "reward", seed),
-        f"greedy best-of-{candidates} by distance": GreedyLatent(candidates, "distance", seed),
-    }
-    for policy in sorted(WEIGHTS_DIR.glob("ppo_gammareach_*.zip")):  # every shipped GammaReach policy
-        controllers[f"PPO {policy.stem.removeprefix('ppo_gammareach_')}"] = PolicyLatent(policy, seed=seed)
-    start = fixed_pairs(core, pairs, clones, seed)
+    start = fixed_pairs(core, pairs, seed)
+    runs: dict[str, Callable[[], dict]] = {"random z": lambda: run_clones(core, start, RandomLatent(seed), clones)}
+    policies = {policy_label(path): path for path in sorted(WEIGHTS_DIR.glob("ppo_gammareach_*.zip"))}
+    for label, path in policies.items():
+        runs[label] = lambda path=path: run_clones(core, start, PolicyLatent(path, seed=seed), clones)
+    searcher = policies.get("policy(10)")
+    for keep in (1, 4):
+        if searcher is not None:
+            runs[f"policy(10) & top{keep}"] = lambda keep=keep: run_search(core, start, PolicyLatent(searcher, seed=seed),
+                                                                           SearchSettings(keep=keep))  # fmt: skip
+    runs["random z & top4"] = lambda: run_search(core, start, RandomLatent(seed), SearchSettings(keep=4))
+    if bf16 and searcher is not None:
+        bf16_core = GammaReachCore(GammaReachConfig(), GammaGenerator.load().set_precision("bfloat16"))
+        runs["policy(10), bf16 prior"] = lambda: run_clones(bf16_core, start, PolicyLatent(searcher, seed=seed), clones)
     rows: dict[str, dict] = {}
     seconds: dict[str, float] = {}
-    for name, controller in controllers.items():
+    for name, run in runs.items():
         tick = time.perf_counter()
-        rows[name] = run_controller(core, start.clone(), controller)
+        rows[name] = run()
         seconds[name] = time.perf_counter() - tick
         print(f"{name}: success {rows[name]['success rate']:.2f} in {seconds[name]:.0f} s")
     name_suffix = "_quick" if quick else ""
     lines = [
         f"# GAMMA goal reaching ({'quick: ' if quick else ''}{pairs} body-goal pairs × {clones} clones, up to 60 primitives)",
         "",
-        "Reward config: paper. Steps: primitives to reach the goal (successful bodies); avg. dist.: pelvis-goal ground "
-        "distance (m) when the episode ends; contact score: Eq. 11 per primitive; FS: WANDR's, 40 fps, 0.2 m/s.",
+        "The paper's protocol (Sec. 4.2): a pair succeeds when any clone reaches the goal (0.75 m), and ends there. "
+        "Steps: primitives to the first arrival (successful pairs); avg. dist.: pelvis-goal ground distance (m) of all "
+        "clones when the pair ends (search rows: of the kept nodes); contact score: Eq. 11 per primitive; FS: WANDR's, "
+        "40 fps, 0.2 m/s. Search rows: 16 roots, 4 children per node, top-K kept. Policies sample their latents.",
         "",
         "| controller | steps ↓ | success rate ↑ | avg. dist. ↓ | contact score ↑ | FS ↓ | seconds |",
         "|---|---|---|---|---|---|---|",
@@ -130,17 +186,17 @@ def main(pairs: int = 100, clones: int = 32, candidates: int = 16, seed: int = 0
                      f"{row['contact score']:.3f} | {row['FS']:.3f} | {seconds[name]:.0f} |")  # fmt: skip
     for name, (steps, success, distance, score) in PAPER_ROWS.items():
         lines.append(f"| {name} | {steps} | {success} | {distance} | {score} | | |")
-    lines += ["", machine_line(), f"Command: `motion-envs bench gamma{' --quick' if quick else ''}`; "
+    lines += ["", machine_line(), f"Command: `motion-envs bench gamma{' --quick' if quick else ''}{' --bf16' if bf16 else ''}`; "
               f"{time.perf_counter() - began:.0f} s in all.", "", f"![paths](gamma_control{name_suffix}.png)", ""]  # fmt: skip
     text = "\n".join(lines)
     print(text)
     RESULTS.mkdir(parents=True, exist_ok=True)
     atomic_write(RESULTS / f"gamma_control{name_suffix}.md", lambda file: file.write(text.encode()))
     figure, axes = plt.subplots(1, len(rows), figsize=(5 * len(rows), 5), squeeze=False)
-    goals = start.goal[::clones, :2].numpy()
+    goals = start.goal[:, :2].numpy()
     for axis, (name, row) in zip(axes[0], rows.items()):
         for pair in range(pairs):
-            path = row["paths"][pair * clones]
+            path = row["paths"][pair]
             axis.plot(path[:, 0], path[:, 1], linewidth=0.8)  # NaN after the episode ends
         axis.scatter(goals[:, 0], goals[:, 1], marker="x", color="black", s=20)
         axis.set(title=f"{name}: success {row['success rate']:.2f}", xlim=(-10, 10), ylim=(-10, 10), aspect="equal")

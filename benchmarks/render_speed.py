@@ -15,7 +15,7 @@ import numpy as np
 import torch
 
 from benchmarks.machine import machine_line
-from motion_envs.atomic import atomic_write
+from benchmarks.sections import replace_section
 from motion_envs.data.primitives import GAMMA_FPS
 from motion_envs.data.start_poses import load_start_poses
 from motion_envs.render.camera import follow_camera
@@ -58,13 +58,5 @@ def main() -> int:
     lines += ["", machine_line(), "Command: `motion-envs bench render`.", ""]
     section = "\n".join(lines)
     print(section)
-    path = RESULTS / "throughput.md"
-    text = path.read_text() if path.exists() else "# Throughput\n\n"
-    if SECTION in text:
-        before, _, after = text.partition(SECTION)
-        following = after.find("\n## ")
-        text = before + section + (after[following + 1 :] if following >= 0 else "")
-    else:
-        text = text.rstrip() + "\n\n" + section
-    atomic_write(path, lambda file: file.write(text.encode()))
+    replace_section(RESULTS / "throughput.md", section)
     return 0

@@ -1,0 +1,126 @@
+"""GAMMA rollout speed (`motion-envs bench speed`): the paper's Table S3 on this machine.
+
+For batches of 64 to 4,096 bodies: seconds per primitive (one
+`GammaReachCore.step`: both predictors, body regression, skinning, blending,
+markers and the reward) and body-primitives per second, in fp32 and with the
+prior's networks in bf16 (`GammaGenerator.set_precision`). Beside them: the
+FLOPs of one body-primitive (counted by `torch.utils.flop_counter`), this
+machine's own matmul FLOP/s in fp32 and bf16 (measured in the same run), and
+the share of it a rollout achieves. Then the same for `env.step` through the
+SB3 adapter (`NativeVecEnv` over `GammaReachVectorEnv`: observations, numpy
+conversion, auto-reset) against the raw core step. Writes the "GAMMA rollout"
+section of `benchmarks/results/throughput.md`.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch.utils.flop_counter import FlopCounterMode
+
+from agents.vec_env import NativeVecEnv
+from benchmarks.machine import machine_line
+from benchmarks.sections import replace_section
+from motion_envs.envs.gamma_reach import GammaReachConfig, GammaReachCore, GammaReachState, GammaReachVectorEnv
+from motion_envs.priors.gamma_generator import GammaGenerator
+
+RESULTS = Path(__file__).resolve().parent / "results"
+SECTION = "## GAMMA rollout"
+PAPER_SECONDS_1024 = 0.85
+"""Table S3: seconds per primitive for 1,024 bodies on a Quadro RTX 6000 (≈ 1,205 body-primitives/s)."""
+
+
+def best_seconds(run: Callable[[], object], repeats: int) -> float:
+    """Fastest of `repeats` timed calls after one warm-up call."""
+    run()
+    times = []
+    for _ in range(repeats):
+        tick = time.perf_counter()
+        run()
+        times.append(time.perf_counter() - tick)
+    return min(times)
+
+
+def matmul_flops(dtype: torch.dtype, size: int = 1024) -> float:
+    """FLOP/s of a square fp32/bf16 matmul on this machine (all torch threads)."""
+    a, b = torch.randn(size, size, dtype=dtype), torch.randn(size, size, dtype=dtype)
+    repeats = 10 if dtype == torch.float32 else 2
+    return 2 * size**3 * repeats / best_seconds(lambda: [a @ b for _ in range(repeats)], 3)
+
+
+def walking_state(core: GammaReachCore, count: int) -> GammaReachState:
+    """`count` bodies after one primitive (2-frame seeds: the steady state of a rollout)."""
+    start = core.sample_initial_state([np.random.default_rng(i) for i in range(count)])
+    state, _ = core.step(start, torch.zeros(count, core.generator.latent_size))
+    return state
+
+
+def step_flops(core: GammaReachCore, state: GammaReachState) -> float:
+    """FLOPs of one core step per body (matmuls and convolutions, as counted by torch)."""
+    z = torch.zeros(state.num_bodies, core.generator.latent_size)
+    with FlopCounterMode(display=False) as counter:
+        core.step(state, z)
+    return counter.get_total_flops() / state.num_bodies
+
+
+def main(batches: tuple[int, ...] = (64, 128, 256, 512, 1024, 4096), bf16_batches: tuple[int, ...] = (64, 256, 1024),
+         env_batches: tuple[int, ...] = (64, 256, 1024)) -> int:  # fmt: skip
+    began = time.perf_counter()
+    generator = GammaGenerator.load()
+    core = GammaReachCore(GammaReachConfig(), generator)
+    flops = {"fp32": matmul_flops(torch.float32), "bf16": matmul_flops(torch.bfloat16)}
+    per_body = step_flops(core, walking_state(core, 64))
+    rows = []
+    for precision, sizes in (("float32", batches), ("bfloat16", bf16_batches)):
+        generator.set_precision(precision)
+        for count in sizes:
+            state = walking_state(core, count)
+            z = torch.randn(count, generator.latent_size, generator=torch.Generator().manual_seed(0))
+            seconds = best_seconds(lambda: core.step(state, z), 3 if count <= 1024 else 1)
+            rows.append((precision, count, seconds, count / seconds))
+            print(f"{precision} {count}: {seconds:.3f} s per primitive, {count / seconds:,.0f} body-primitives/s")
+    generator.set_precision("float32")
+    env_rows = []
+    for count in env_batches:
+        venv = NativeVecEnv(GammaReachVectorEnv(num_envs=count, generator=generator))
+        venv.seed(0)
+        venv.reset()
+        actions = np.random.default_rng(0).standard_normal((count, generator.latent_size)).astype(np.float32)
+
+        def env_step() -> None:
+            venv.step_async(actions)
+            venv.step_wait()
+
+        state = walking_state(core, count)
+        raw = best_seconds(lambda: core.step(state, torch.as_tensor(actions)), 3)
+        wrapped = best_seconds(env_step, 3)
+        env_rows.append((count, raw, wrapped))
+        print(f"env {count}: raw {raw:.3f} s, SB3 adapter {wrapped:.3f} s ({wrapped / raw - 1:+.0%})")
+    lines = [
+        SECTION, "",
+        "One primitive (10 frames at 40 fps, 8 new) for every body: both marker predictors, body regression of 9 "
+        "frames, skinning, blending, markers and the reward (`GammaReachCore.step`), best of 3. The paper's Table S3: "
+        f"{PAPER_SECONDS_1024} s per primitive for 1,024 bodies on a Quadro RTX 6000 GPU ≈ "
+        f"{1024 / PAPER_SECONDS_1024:,.0f} body-primitives/s. One body-primitive costs {per_body / 1e6:.1f} MFLOP "
+        f"(torch's FLOP counter). This machine's matmul (1024², same run): fp32 {flops['fp32'] / 1e9:.0f} GFLOP/s, "
+        f"bf16 {flops['bf16'] / 1e9:.1f} GFLOP/s.", "",
+        "| networks | bodies | s per primitive | body-primitives/s | vs paper's GPU | share of matmul FLOP/s |",
+        "|---|---|---|---|---|---|",
+    ]  # fmt: skip
+    for precision, count, seconds, rate in rows:
+        peak = flops["fp32" if precision == "float32" else "bf16"]
+        lines.append(f"| {precision} | {count:,} | {seconds:.3f} | {rate:,.0f} | {rate / (1024 / PAPER_SECONDS_1024):.2f}× "
+                     f"| {rate * per_body / peak:.0%} |")  # fmt: skip
+    lines += ["", "`env.step` through the SB3 adapter (`NativeVecEnv` over `GammaReachVectorEnv`, fp32) against the "
+              "raw core step on the same bodies:", "",
+              "| bodies | raw step (s) | SB3 env.step (s) | overhead |", "|---|---|---|---|"]  # fmt: skip
+    lines += [f"| {count:,} | {raw:.3f} | {wrapped:.3f} | {wrapped / raw - 1:+.0%} |" for count, raw, wrapped in env_rows]
+    lines += ["", machine_line(), f"Command: `motion-envs bench speed`; {time.perf_counter() - began:.0f} s in all.", ""]
+    section = "\n".join(lines)
+    print(section)
+    replace_section(RESULTS / "throughput.md", section)
+    return 0

@@ -17,10 +17,11 @@ search per pair (16 roots, 4 children per node, K kept); their "clones" are
 the K kept nodes: avg. dist. is the kept nodes' mean when the search ends,
 and contact score and FS are those of the chosen branch, replayed.
 
-Rows: random z, each shipped GammaReach policy (sampled latents, as the
-paper), the α = 10 policy with top-1 and top-4 search, and the α = 10
-policy with the prior run in bf16 (`GammaGenerator.set_precision`). `--quick`
-(the README's main job) runs fewer pairs and clones. Writes
+Rows: random z, the g-CVAE (`baselines.g_cvae`, z ~ N(0, I)), each shipped
+GammaReach policy (sampled latents, as the paper), the α = 10 policy with
+top-1 and top-4 search, random z with top-4 search, and with `--bf16` the
+α = 10 policy with the prior's networks in bf16 (`GammaGenerator.set_precision`).
+`--quick` (the README's main job) runs fewer pairs and clones. Writes
 `benchmarks/results/gamma_control.md` (or `gamma_control_quick.md`) and a
 top-down plot of the first clone (or chosen branch) per pair.
 """
@@ -40,6 +41,7 @@ import torch  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
 from agents.controllers import PolicyLatent  # noqa: E402
+from baselines.g_cvae import G_CVAE_WEIGHTS, goal_cvae_generator  # noqa: E402
 from baselines.latent_controllers import RandomLatent  # noqa: E402
 from benchmarks.machine import machine_line  # noqa: E402
 from motion_envs.atomic import atomic_write  # noqa: E402
@@ -149,6 +151,9 @@ def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False,
     core = GammaReachCore(GammaReachConfig())
     start = fixed_pairs(core, pairs, seed)
     runs: dict[str, Callable[[], dict]] = {"random z": lambda: run_clones(core, start, RandomLatent(seed), clones)}
+    if G_CVAE_WEIGHTS.exists():
+        goal_core = GammaReachCore(GammaReachConfig(), goal_cvae_generator(base=core.generator))
+        runs["g-CVAE"] = lambda: run_clones(goal_core, start, RandomLatent(seed), clones)
     policies = {policy_label(path): path for path in sorted(WEIGHTS_DIR.glob("ppo_gammareach_*.zip"))}
     for label, path in policies.items():
         runs[label] = lambda path=path: run_clones(core, start, PolicyLatent(path, seed=seed), clones)

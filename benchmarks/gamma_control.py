@@ -139,9 +139,36 @@ def run_search(core: GammaReachCore, start: GammaReachState, proposal: Controlle
 
 
 def policy_label(path: Path) -> str:
-    """ppo_gammareach_alpha10_paper.zip -> "policy(10)"; another reward is named: "policy(10), release reward"."""
+    """ppo_gammareach_alpha10_paper.zip -> "policy(10)"; another reward is named: "policy(10), release reward".
+    The search rows use the α = 10 policy of the paper's reward family (e.g. paper-goal5)."""
     alpha, _, reward = path.stem.removeprefix("ppo_gammareach_alpha").partition("_")
     return f"policy({alpha})" + ("" if reward == "paper" else f", {reward} reward")
+
+
+BF16_CHECK = (20, 8)
+"""Pairs and clones of the bf16 check (the networks run ~10x slower in bf16 on CPUs without bf16 units)."""
+
+
+def timed_rows(runs: dict[str, Callable[[], dict]]) -> tuple[dict[str, dict], dict[str, float]]:
+    rows, seconds = {}, {}
+    for name, run in runs.items():
+        tick = time.perf_counter()
+        rows[name] = run()
+        seconds[name] = time.perf_counter() - tick
+        print(f"{name}: success {rows[name]['success rate']:.2f} in {seconds[name]:.0f} s")
+    return rows, seconds
+
+
+def table(rows: dict[str, dict], seconds: dict[str, float], paper: dict[str, tuple] | None = None) -> list[str]:
+    lines = ["| controller | steps ↓ | success rate ↑ | avg. dist. ↓ | contact score ↑ | FS ↓ | seconds |",
+             "|---|---|---|---|---|---|---|"]  # fmt: skip
+    for name, row in rows.items():
+        steps = "–" if np.isnan(row["steps"]) else f"{row['steps']:.1f}"  # no pair reached its goal
+        lines.append(f"| {name} | {steps} | {row['success rate']:.2f} | {row['avg. dist.']:.2f} | "
+                     f"{row['contact score']:.3f} | {row['FS']:.3f} | {seconds[name]:.0f} |")  # fmt: skip
+    for name, (steps, success, distance, score) in (paper or {}).items():
+        lines.append(f"| {name} | {steps} | {success} | {distance} | {score} | | |")
+    return lines
 
 
 def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False, bf16: bool = False) -> int:
@@ -157,22 +184,14 @@ def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False,
     policies = {policy_label(path): path for path in sorted(WEIGHTS_DIR.glob("ppo_gammareach_*.zip"))}
     for label, path in policies.items():
         runs[label] = lambda path=path: run_clones(core, start, PolicyLatent(path, seed=seed), clones)
-    searcher = policies.get("policy(10)")
+    paper_family = [path for label, path in policies.items() if label.startswith("policy(10)") and "release" not in label]
+    searcher = paper_family[0] if paper_family else None
     for keep in (1, 4):
         if searcher is not None:
             runs[f"policy(10) & top{keep}"] = lambda keep=keep: run_search(core, start, PolicyLatent(searcher, seed=seed),
                                                                            SearchSettings(keep=keep))  # fmt: skip
     runs["random z & top4"] = lambda: run_search(core, start, RandomLatent(seed), SearchSettings(keep=4))
-    if bf16 and searcher is not None:
-        bf16_core = GammaReachCore(GammaReachConfig(), GammaGenerator.load().set_precision("bfloat16"))
-        runs["policy(10), bf16 prior"] = lambda: run_clones(bf16_core, start, PolicyLatent(searcher, seed=seed), clones)
-    rows: dict[str, dict] = {}
-    seconds: dict[str, float] = {}
-    for name, run in runs.items():
-        tick = time.perf_counter()
-        rows[name] = run()
-        seconds[name] = time.perf_counter() - tick
-        print(f"{name}: success {rows[name]['success rate']:.2f} in {seconds[name]:.0f} s")
+    rows, seconds = timed_rows(runs)
     name_suffix = "_quick" if quick else ""
     lines = [
         f"# GAMMA goal reaching ({'quick: ' if quick else ''}{pairs} body-goal pairs × {clones} clones, up to 60 primitives)",
@@ -181,30 +200,35 @@ def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False,
         "Steps: primitives to the first arrival (successful pairs); avg. dist.: pelvis-goal ground distance (m) of all "
         "clones when the pair ends (search rows: of the kept nodes); contact score: Eq. 11 per primitive; FS: WANDR's, "
         "40 fps, 0.2 m/s. Search rows: 16 roots, 4 children per node, top-K kept. Policies sample their latents.",
-        "",
-        "| controller | steps ↓ | success rate ↑ | avg. dist. ↓ | contact score ↑ | FS ↓ | seconds |",
-        "|---|---|---|---|---|---|---|",
-    ]
-    for name, row in rows.items():
-        steps = "–" if np.isnan(row["steps"]) else f"{row['steps']:.1f}"  # no body reached its goal
-        lines.append(f"| {name} | {steps} | {row['success rate']:.2f} | {row['avg. dist.']:.2f} | "
-                     f"{row['contact score']:.3f} | {row['FS']:.3f} | {seconds[name]:.0f} |")  # fmt: skip
-    for name, (steps, success, distance, score) in PAPER_ROWS.items():
-        lines.append(f"| {name} | {steps} | {success} | {distance} | {score} | | |")
+        "", *table(rows, seconds, PAPER_ROWS),
+    ]  # fmt: skip
+    if bf16 and searcher is not None:
+        check_pairs, check_clones = BF16_CHECK
+        subset = start.index(torch.arange(min(check_pairs, pairs)))
+        bf16_core = GammaReachCore(GammaReachConfig(), GammaGenerator.load().set_precision("bfloat16"))
+        checks, check_seconds = timed_rows({
+            "policy(10), fp32 prior": lambda: run_clones(core, subset, PolicyLatent(searcher, seed=seed), check_clones),
+            "policy(10), bf16 prior": lambda: run_clones(bf16_core, subset, PolicyLatent(searcher, seed=seed), check_clones),
+        })  # fmt: skip
+        lines += ["", f"bf16 check: the first {len(subset)} pairs × {check_clones} clones, the prior's networks in fp32 "
+                  "and in bf16 (`GammaGenerator.set_precision`), same policy and seed.", "", *table(checks, check_seconds)]  # fmt: skip
     lines += ["", machine_line(), f"Command: `motion-envs bench gamma{' --quick' if quick else ''}{' --bf16' if bf16 else ''}`; "
               f"{time.perf_counter() - began:.0f} s in all.", "", f"![paths](gamma_control{name_suffix}.png)", ""]  # fmt: skip
     text = "\n".join(lines)
     print(text)
     RESULTS.mkdir(parents=True, exist_ok=True)
     atomic_write(RESULTS / f"gamma_control{name_suffix}.md", lambda file: file.write(text.encode()))
-    figure, axes = plt.subplots(1, len(rows), figsize=(5 * len(rows), 5), squeeze=False)
+    columns = min(4, len(rows))
+    figure, axes = plt.subplots(-(-len(rows) // columns), columns, figsize=(4 * columns, 4 * -(-len(rows) // columns)),
+                                squeeze=False)  # fmt: skip
     goals = start.goal[:, :2].numpy()
-    for axis, (name, row) in zip(axes[0], rows.items()):
+    for axis in axes.flat[len(rows) :]:
+        axis.axis("off")
+    for axis, (name, row) in zip(axes.flat, rows.items()):
         for pair in range(pairs):
-            path = row["paths"][pair]
-            axis.plot(path[:, 0], path[:, 1], linewidth=0.8)  # NaN after the episode ends
-        axis.scatter(goals[:, 0], goals[:, 1], marker="x", color="black", s=20)
-        axis.set(title=f"{name}: success {row['success rate']:.2f}", xlim=(-10, 10), ylim=(-10, 10), aspect="equal")
+            axis.plot(row["paths"][pair, :, 0], row["paths"][pair, :, 1], linewidth=0.8)  # NaN after the pair ends
+        axis.scatter(goals[:, 0], goals[:, 1], marker="x", color="black", s=12)
+        axis.set(title=f"{name}: {row['success rate']:.2f}", xlim=(-10, 10), ylim=(-10, 10), aspect="equal")
     figure.tight_layout()
-    atomic_write(RESULTS / f"gamma_control{name_suffix}.png", lambda file: figure.savefig(file, format="png", dpi=100))
+    atomic_write(RESULTS / f"gamma_control{name_suffix}.png", lambda file: figure.savefig(file, format="png", dpi=80))
     return 0

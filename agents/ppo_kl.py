@@ -21,6 +21,7 @@ stops at an approximate KL of 0.02), `clip_range=0.2`, `gamma=0.99`.
 
 from __future__ import annotations
 
+import copy
 from typing import Any
 
 import torch
@@ -35,9 +36,28 @@ PAPER_SETTINGS: dict[str, Any] = {"gamma": 0.99, "gae_lambda": 1.0, "clip_range"
 
 
 class LatentPriorPolicy(ActorCriticPolicy):
-    """SB3's actor-critic policy that remembers the Gaussian of its latest forward pass."""
+    """SB3's actor-critic policy that remembers the Gaussian (and observations) of its latest forward pass.
+
+    `anchored=True` keeps a frozen copy of the actor's mean network, set by `set_anchor()` (e.g. after
+    cloning the data's latents), for `anchor_kl`."""
 
     last_distribution: DiagGaussianDistribution | None = None
+    last_observation: torch.Tensor | None = None
+
+    def __init__(self, *args: Any, anchored: bool = False, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        actor = torch.nn.Sequential(self.mlp_extractor.policy_net, self.action_net)
+        self.anchor = copy.deepcopy(actor).requires_grad_(False) if anchored else None  # not in the optimiser
+
+    def set_anchor(self) -> None:
+        """Freeze the actor's current mean network as the anchor."""
+        if self.anchor is None:
+            raise RuntimeError("this policy was built without an anchor (anchored=False)")
+        self.anchor.load_state_dict(torch.nn.Sequential(self.mlp_extractor.policy_net, self.action_net).state_dict())
+
+    def evaluate_actions(self, obs: torch.Tensor, actions: torch.Tensor):
+        self.last_observation = obs
+        return super().evaluate_actions(obs, actions)
 
     def _get_action_dist_from_latent(self, latent_pi: torch.Tensor):
         distribution = super()._get_action_dist_from_latent(latent_pi)
@@ -51,29 +71,46 @@ class LatentPriorPolicy(ActorCriticPolicy):
         normal = self.last_distribution.distribution
         return kl_to_standard_normal(normal.loc, 2.0 * normal.scale.log()).mean()
 
+    def anchor_kl(self) -> torch.Tensor:
+        """Mean over dims and batch of KL(π(z|s) ‖ N(μ_anchor(s), σ²)) for the latest `evaluate_actions`."""
+        normal = self.last_distribution.distribution
+        with torch.no_grad():
+            anchor_mean = self.anchor(self.extract_features(self.last_observation, self.pi_features_extractor))
+        return ((normal.loc - anchor_mean).pow(2) / (2.0 * normal.scale.detach().pow(2))).mean()
+
 
 class PPOKL(PPO):
-    """PPO + α Ψ(KL(π ‖ N(0, I))). `kl_prior_coef` is α (paper: 1 or 10); other arguments are SB3's PPO's,
-    with the paper's settings (`PAPER_SETTINGS`) where not given."""
+    """PPO + α Ψ(KL(π ‖ N(0, I))) [+ β KL(π ‖ anchor)]. `kl_prior_coef` is α (paper: 1 or 10); `anchor_coef`
+    is β (0: the paper's loss; > 0 also holds the actor near its anchor, see `LatentPriorPolicy.set_anchor`);
+    other arguments are SB3's PPO's, with the paper's settings (`PAPER_SETTINGS`) where not given."""
 
     policy_aliases = {"MlpPolicy": LatentPriorPolicy}
 
-    def __init__(self, policy: str | type[LatentPriorPolicy], env: Any, kl_prior_coef: float = 10.0, **kwargs: Any) -> None:
-        if kl_prior_coef < 0:
-            raise ValueError(f"kl_prior_coef must be >= 0, got {kl_prior_coef}")
-        self.kl_prior_coef = kl_prior_coef
+    def __init__(self, policy: str | type[LatentPriorPolicy], env: Any, kl_prior_coef: float = 10.0,
+                 anchor_coef: float = 0.0, **kwargs: Any) -> None:  # fmt: skip
+        if kl_prior_coef < 0 or anchor_coef < 0:
+            raise ValueError(f"kl_prior_coef and anchor_coef must be >= 0, got {kl_prior_coef} and {anchor_coef}")
+        self.kl_prior_coef, self.anchor_coef = kl_prior_coef, anchor_coef
+        if anchor_coef > 0:
+            kwargs["policy_kwargs"] = {**kwargs.get("policy_kwargs", {}), "anchored": True}
         super().__init__(policy, env, **{**PAPER_SETTINGS, **kwargs})
 
     def train(self) -> None:
         optimiser = self.policy.optimizer
         plain_zero_grad = optimiser.zero_grad
         values: list[float] = []
+        anchored: list[float] = []
 
         def zero_grad_then_regularise(set_to_none: bool = True) -> None:
             plain_zero_grad(set_to_none=set_to_none)
             kl = self.policy.prior_kl()
             values.append(float(kl.detach()))
-            (self.kl_prior_coef * robust_kl(kl)).backward(retain_graph=True)  # the PPO loss shares this graph
+            regulariser = self.kl_prior_coef * robust_kl(kl)
+            if self.anchor_coef > 0:
+                anchor = self.policy.anchor_kl()
+                anchored.append(float(anchor.detach()))
+                regulariser = regulariser + self.anchor_coef * anchor
+            regulariser.backward(retain_graph=True)  # the PPO loss shares this graph
 
         optimiser.zero_grad = zero_grad_then_regularise
         try:
@@ -82,3 +119,5 @@ class PPOKL(PPO):
             optimiser.zero_grad = plain_zero_grad
         if values:
             self.logger.record("train/prior_kl", sum(values) / len(values))
+        if anchored:
+            self.logger.record("train/anchor_kl", sum(anchored) / len(anchored))

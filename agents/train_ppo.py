@@ -62,6 +62,8 @@ class PPOTrainConfig:
     init: str = "data"
     """"data": the actor starts from the data's latents (`agents.behaviour_cloning`); "scratch": random."""
     clone_epochs: int = 40
+    anchor: float = 0.0
+    """β of KL(π ‖ the cloned policy) added to the loss (`PPOKL.anchor_coef`); 0: the paper's loss."""
     ship: str = "best"
     """"best": ship the checkpoint whose training-success window was best (PPO from the cloned start peaks
     and then drifts: measured 0.23 -> 0.51 -> 0.09 over 230k steps at 64 bodies); "last": the final one."""
@@ -76,6 +78,8 @@ class PPOTrainConfig:
             raise ValueError(f"init must be 'data' or 'scratch', got {self.init!r}")
         if self.ship not in ("best", "last"):
             raise ValueError(f"ship must be 'best' or 'last', got {self.ship!r}")
+        if self.anchor > 0 and self.init != "data":
+            raise ValueError("anchor > 0 holds the policy near its cloned start: it needs init='data'")
 
     def weights_path(self) -> Path:
         name = self.env_id.split("/")[-1].split("-")[0].lower()
@@ -140,7 +144,8 @@ def train_ppo(config: PPOTrainConfig, clone_from: GoalWindows | None = None) -> 
         print(f"resuming {checkpoint} at {model.num_timesteps} steps", file=sys.stderr)
     else:
         width = config.net_width
-        model = PPOKL("MlpPolicy", venv, kl_prior_coef=config.alpha, n_steps=config.n_steps, batch_size=config.batch_size,
+        model = PPOKL("MlpPolicy", venv, kl_prior_coef=config.alpha, anchor_coef=config.anchor, n_steps=config.n_steps,
+                      batch_size=config.batch_size,
                       n_epochs=config.n_epochs, learning_rate=config.learning_rate, seed=config.seed, device="cpu",
                       tensorboard_log=str(config.run_dir / "tensorboard"),
                       policy_kwargs={"net_arch": {"pi": [width, width], "vf": [width, width]},
@@ -150,6 +155,8 @@ def train_ppo(config: PPOTrainConfig, clone_from: GoalWindows | None = None) -> 
             latents = posterior_latents(generator.predictor_2f, clone_from)
             cloning = clone_latents(model.policy, clone_from.observation, latents, epochs=config.clone_epochs, seed=config.seed)
             print("cloned data latents: " + ", ".join(f"{k} {v:.4f}" for k, v in cloning.items()), file=sys.stderr)
+            if config.anchor > 0:
+                model.policy.set_anchor()
             cloning_path = config.run_dir / "cloning.json"
             atomic_write(cloning_path, lambda file: file.write(json.dumps(cloning).encode()))
     callback = CurveCallback(config.run_dir, config.checkpoint_minutes, curve)

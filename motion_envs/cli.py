@@ -82,7 +82,7 @@ def _train_ppo(args: argparse.Namespace) -> int:
     given = {"env_id": args.env, "reward": args.reward, "alpha": args.alpha, "num_envs": args.num_envs,
              "total_timesteps": args.timesteps, "run_dir": args.run_dir, "weights": args.weights, "seed": args.seed,
              "init": args.init, "log_std_init": args.log_std_init, "learning_rate": args.learning_rate,
-             "n_steps": args.n_steps}  # fmt: skip
+             "n_steps": args.n_steps, "anchor": args.anchor}  # fmt: skip
     config = PPOTrainConfig(command="motion-envs " + " ".join(sys.argv[1:]),
                             **{name: value for name, value in given.items() if value is not None})  # fmt: skip
     if config.run_dir == PPOTrainConfig.run_dir:
@@ -239,6 +239,7 @@ def parser() -> argparse.ArgumentParser:
     train.add_argument("--log-std-init", type=float, default=None, help="ppo: initial log sigma of the policy (default -1)")
     train.add_argument("--learning-rate", type=float, default=None, help="ppo: Adam learning rate")
     train.add_argument("--n-steps", type=int, default=None, help="ppo: primitives per body per rollout")
+    train.add_argument("--anchor", type=float, default=None, help="ppo: weight of KL to the cloned policy (default 0)")
     train.add_argument("--seed", type=int, default=None)
     _add_data_args(train, ["cmu"])
     train.set_defaults(run=_train)

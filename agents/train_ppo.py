@@ -62,6 +62,8 @@ class PPOTrainConfig:
     init: str = "data"
     """"data": the actor starts from the data's latents (`agents.behaviour_cloning`); "scratch": random."""
     clone_epochs: int = 40
+    bootstrap_truncation: bool = False
+    """SB3's γ·V(s) at time-limit ends; off: the paper's Monte-Carlo returns (see `NativeVecEnv`)."""
     anchor: float = 0.0
     """β of KL(π ‖ the cloned policy) added to the loss (`PPOKL.anchor_coef`); 0: the paper's loss."""
     ship: str = "best"
@@ -129,7 +131,8 @@ def train_ppo(config: PPOTrainConfig, clone_from: GoalWindows | None = None) -> 
         raise ValueError("init='data' needs goal windows from the data (clone_from); pass init='scratch' to skip")
     config.run_dir.mkdir(parents=True, exist_ok=True)
     torch.manual_seed(config.seed)
-    venv = VecMonitor(NativeVecEnv.make(config.env_id, num_envs=config.num_envs, reward=config.reward))
+    venv = VecMonitor(NativeVecEnv.make(config.env_id, num_envs=config.num_envs, reward=config.reward,
+                                        bootstrap_truncation=config.bootstrap_truncation))  # fmt: skip
     venv.seed(config.seed)
     statistics = config.run_dir / "vecnormalize.pkl"
     if statistics.exists():

@@ -46,6 +46,16 @@ def test_adapter_reports_episode_ends_as_sb3_expects(gamma):
         assert info["terminal_observation"].shape == (804,) and info["episode"]["l"] == 2
 
 
+def test_time_limits_can_be_reported_as_true_ends(gamma):
+    """Without bootstrapping, SB3 sees a plain end: no γ·V(last observation) is added to the last reward."""
+    venv = NativeVecEnv.make("motion_envs/GammaReach-v0", num_envs=2, generator=gamma, max_primitives=1,
+                             bootstrap_truncation=False)  # fmt: skip
+    venv.reset()
+    _, _, dones, infos = venv.step(np.zeros((2, 128), dtype=np.float32))
+    assert dones.all() and not any(info["TimeLimit.truncated"] for info in infos)
+    assert all(info["terminal_observation"].shape == (804,) for info in infos)
+
+
 def test_adapter_rejects_next_step_autoreset_envs():
     import gymnasium as gym
 

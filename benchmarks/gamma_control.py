@@ -28,6 +28,7 @@ top-down plot of the first clone (or chosen branch) per pair.
 
 from __future__ import annotations
 
+import itertools
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -52,7 +53,7 @@ from motion_envs.metrics import foot_skating, skating_threshold  # noqa: E402
 from motion_envs.priors.canonical import PELVIS  # noqa: E402
 from motion_envs.priors.gamma_generator import GammaGenerator  # noqa: E402
 from motion_envs.priors.training import WEIGHTS_DIR  # noqa: E402
-from motion_envs.wrappers.tree_search import SearchSettings, beam_search  # noqa: E402
+from motion_envs.wrappers.tree_search import SearchCost, SearchSettings, beam_search  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 PAPER_ROWS = {  # GAMMA Table 1: steps, success rate, avg. dist., contact score
@@ -186,10 +187,11 @@ def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False,
         runs[label] = lambda path=path: run_clones(core, start, PolicyLatent(path, seed=seed), clones)
     paper_family = [path for label, path in policies.items() if label.startswith("policy(10)") and "release" not in label]
     searcher = paper_family[0] if paper_family else None
-    for keep in (1, 4):
+    costs = (("", SearchCost()), (", distance cost", SearchCost.distance_only()))
+    for keep, (cost_name, cost) in itertools.product((1, 4), costs):
         if searcher is not None:
-            runs[f"policy(10) & top{keep}"] = lambda keep=keep: run_search(core, start, PolicyLatent(searcher, seed=seed),
-                                                                           SearchSettings(keep=keep))  # fmt: skip
+            runs[f"policy(10) & top{keep}{cost_name}"] = lambda keep=keep, cost=cost: run_search(
+                core, start, PolicyLatent(searcher, seed=seed), SearchSettings(keep=keep, cost=cost))  # fmt: skip
     runs["random z & top4"] = lambda: run_search(core, start, RandomLatent(seed), SearchSettings(keep=4))
     rows, seconds = timed_rows(runs)
     name_suffix = "_quick" if quick else ""
@@ -199,7 +201,8 @@ def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False,
         "The paper's protocol (Sec. 4.2): a pair succeeds when any clone reaches the goal (0.75 m), and ends there. "
         "Steps: primitives to the first arrival (successful pairs); avg. dist.: pelvis-goal ground distance (m) of all "
         "clones when the pair ends (search rows: of the kept nodes); contact score: Eq. 11 per primitive; FS: WANDR's, "
-        "40 fps, 0.2 m/s. Search rows: 16 roots, 4 children per node, top-K kept. Policies sample their latents.",
+        "40 fps, 0.2 m/s. Search rows: 16 roots, 4 children per node, top-K kept, the release's node cost (contact + "
+        "0.1 × orientation + 0.1 × distance) or distance alone (`SearchCost.distance_only`). Policies sample their latents.",
         "", *table(rows, seconds, PAPER_ROWS),
     ]  # fmt: skip
     if bf16 and searcher is not None:

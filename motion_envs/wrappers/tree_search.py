@@ -62,6 +62,14 @@ class SearchCost:
     """m/s the slowest marker may move for free (forward difference)."""
     fps: int = 40
 
+    @classmethod
+    def distance_only(cls) -> SearchCost:
+        """The pelvis-goal distance alone. Our CMU-trained prior skates more than the release's tolerances
+        (0.05 m, 0.075 m/s) allow, so the release's cost prefers primitives that stand still: with the
+        same policy and 24 pairs, top-4 reached 0.38 of goals with it and 0.75 with distance alone
+        (contact score 0.97 vs 0.87)."""
+        return cls(ground=0.0, skate=0.0, orientation=0.0, distance=1.0)
+
     def __call__(self, state: BatchedState, result: Any) -> torch.Tensor:
         """(N,) cost of the primitives just generated from `state`."""
         markers = result.primitive.markers

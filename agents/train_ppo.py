@@ -52,8 +52,7 @@ class PPOTrainConfig:
     learning_rate: float = 3e-5
     """Not the release's 3e-4: with 128 action dims and σ ≈ 0.37, one Adam step at 3e-4 moves the policy by an
     approximate KL of ~1 (measured: 0.96), so SB3's early stop ends every update after one minibatch and the
-    cloned policy decays to 1% success within 3 minutes; at 3e-5 the KL per update stays ~0.02 and success
-    rises (measured: 0.23 -> 0.31 in the first 4 minutes, 1e-4 rose to 0.52 and then fell to 0.01)."""
+    cloned policy decayed to 1% success within 3 minutes; at 3e-5 the KL per update stays ~0.01-0.02."""
     total_timesteps: int = 500_000
     net_width: int = 256
     """Hidden width of the policy and value MLPs (two layers each); 256 keeps a saved policy under 10 MB."""
@@ -67,8 +66,8 @@ class PPOTrainConfig:
     anchor: float = 0.0
     """β of KL(π ‖ the cloned policy) added to the loss (`PPOKL.anchor_coef`); 0: the paper's loss."""
     ship: str = "best"
-    """"best": ship the checkpoint whose training-success window was best (PPO from the cloned start peaks
-    and then drifts: measured 0.23 -> 0.51 -> 0.09 over 230k steps at 64 bodies); "last": the final one."""
+    """"best": ship the checkpoint whose training-success window was best, a guard against late drift (before
+    Monte-Carlo returns, runs went 0.23 -> 0.51 -> 0.09 over 230k steps); "last": the final one."""
     checkpoint_minutes: float = 3.0
     seed: int = 0
     run_dir: Path = Path("runs/ppo")

@@ -165,7 +165,7 @@ def train_ppo(config: PPOTrainConfig, clone_from: GoalWindows | None = None) -> 
     remaining = config.total_timesteps - model.num_timesteps
     if remaining > 0:
         model.learn(total_timesteps=remaining, callback=callback, reset_num_timesteps=False, progress_bar=True)
-    callback.save()
+        callback.save()
     weights = config.weights_path()
     best = max(curve, key=lambda point: point["success_rate"]) if curve else None
     if config.ship == "best" and best is not None:

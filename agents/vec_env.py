@@ -31,7 +31,8 @@ class NativeVecEnv(VecEnv):
     observation does not show the time left, as GAMMA's (Monte-Carlo returns over 60 primitives):
     there V of a state at the time limit is the value of the same state with the whole episode ahead,
     and bootstrapping it pays more for running out of time than reaching the goal does (measured on
-    GammaReach: every PPO run drifted from 0.3-0.5 success down to 0.1-0.2 once its critic fitted)."""
+    GammaReach: every PPO run drifted from 0.3-0.5 success down to 0.1-0.2 once its critic fitted; with
+    Monte-Carlo returns the α = 1 run rose steadily from 0.29 to 0.73 over 2.1M steps)."""
 
     def __init__(self, vector_env: VectorEnv, bootstrap_truncation: bool = True) -> None:
         mode = vector_env.metadata.get("autoreset_mode")

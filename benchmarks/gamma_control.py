@@ -18,8 +18,9 @@ the K kept nodes: avg. dist. is the kept nodes' mean when the search ends,
 and contact score and FS are those of the chosen branch, replayed.
 
 Rows: random z, the g-CVAE (`baselines.g_cvae`, z ~ N(0, I)), each shipped
-GammaReach policy (sampled latents, as the paper), the α = 10 policy with
-top-1 and top-4 search, random z with top-4 search, and with `--bf16` the
+GammaReach policy (sampled latents, as the paper), the α = 10 and α = 1
+paper-reward policies with top-1 and top-4 search (the release's node cost
+and distance alone), random z with top-4 search, and with `--bf16` the
 α = 10 policy with the prior's networks in bf16 (`GammaGenerator.set_precision`).
 `--quick` (the README's main job) runs fewer pairs and clones. Writes
 `benchmarks/results/gamma_control.md` (or `gamma_control_quick.md`) and a
@@ -140,8 +141,7 @@ def run_search(core: GammaReachCore, start: GammaReachState, proposal: Controlle
 
 
 def policy_label(path: Path) -> str:
-    """ppo_gammareach_alpha10_paper.zip -> "policy(10)"; another reward is named: "policy(10), release reward".
-    The search rows use the α = 10 policy of the paper's reward family (e.g. paper-goal5)."""
+    """ppo_gammareach_alpha10_paper.zip -> "policy(10)"; another reward is named: "policy(10), release reward"."""
     alpha, _, reward = path.stem.removeprefix("ppo_gammareach_alpha").partition("_")
     return f"policy({alpha})" + ("" if reward == "paper" else f", {reward} reward")
 
@@ -185,13 +185,12 @@ def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False,
     policies = {policy_label(path): path for path in sorted(WEIGHTS_DIR.glob("ppo_gammareach_*.zip"))}
     for label, path in policies.items():
         runs[label] = lambda path=path: run_clones(core, start, PolicyLatent(path, seed=seed), clones)
-    paper_family = [path for label, path in policies.items() if label.startswith("policy(10)") and "release" not in label]
-    searcher = paper_family[0] if paper_family else None
+    searchers = {label: path for label, path in policies.items() if label in ("policy(10)", "policy(1)")}
     costs = (("", SearchCost()), (", distance cost", SearchCost.distance_only()))
-    for keep, (cost_name, cost) in itertools.product((1, 4), costs):
-        if searcher is not None:
-            runs[f"policy(10) & top{keep}{cost_name}"] = lambda keep=keep, cost=cost: run_search(
-                core, start, PolicyLatent(searcher, seed=seed), SearchSettings(keep=keep, cost=cost))  # fmt: skip
+    for (label, path), keep, (cost_name, cost) in itertools.product(searchers.items(), (1, 4), costs):
+        runs[f"{label} & top{keep}{cost_name}"] = lambda path=path, keep=keep, cost=cost: run_search(
+            core, start, PolicyLatent(path, seed=seed), SearchSettings(keep=keep, cost=cost))  # fmt: skip
+    searcher = searchers.get("policy(10)")
     runs["random z & top4"] = lambda: run_search(core, start, RandomLatent(seed), SearchSettings(keep=4))
     rows, seconds = timed_rows(runs)
     name_suffix = "_quick" if quick else ""
@@ -213,7 +212,7 @@ def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False,
             "policy(10), fp32 prior": lambda: run_clones(core, subset, PolicyLatent(searcher, seed=seed), check_clones),
             "policy(10), bf16 prior": lambda: run_clones(bf16_core, subset, PolicyLatent(searcher, seed=seed), check_clones),
         })  # fmt: skip
-        lines += ["", f"bf16 check: the first {len(subset)} pairs × {check_clones} clones, the prior's networks in fp32 "
+        lines += ["", f"bf16 check: the first {subset.num_bodies} pairs × {check_clones} clones, the prior's networks in fp32 "
                   "and in bf16 (`GammaGenerator.set_precision`), same policy and seed.", "", *table(checks, check_seconds)]  # fmt: skip
     lines += ["", machine_line(), f"Command: `motion-envs bench gamma{' --quick' if quick else ''}{' --bf16' if bf16 else ''}`; "
               f"{time.perf_counter() - began:.0f} s in all.", "", f"![paths](gamma_control{name_suffix}.png)", ""]  # fmt: skip

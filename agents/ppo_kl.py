@@ -46,14 +46,17 @@ class LatentPriorPolicy(ActorCriticPolicy):
 
     def __init__(self, *args: Any, anchored: bool = False, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
-        actor = torch.nn.Sequential(self.mlp_extractor.policy_net, self.action_net)
-        self.anchor = copy.deepcopy(actor).requires_grad_(False) if anchored else None  # not in the optimiser
+        self.anchor = copy.deepcopy(self._actor_mean()).requires_grad_(False) if anchored else None  # not optimised
+
+    def _actor_mean(self) -> torch.nn.Sequential:
+        """The actor's mean network, features -> action mean (views of the live modules)."""
+        return torch.nn.Sequential(self.mlp_extractor.policy_net, self.action_net)
 
     def set_anchor(self) -> None:
         """Freeze the actor's current mean network as the anchor."""
         if self.anchor is None:
             raise RuntimeError("this policy was built without an anchor (anchored=False)")
-        self.anchor.load_state_dict(torch.nn.Sequential(self.mlp_extractor.policy_net, self.action_net).state_dict())
+        self.anchor.load_state_dict(self._actor_mean().state_dict())
 
     def evaluate_actions(self, obs: torch.Tensor, actions: torch.Tensor):
         self.last_observation = obs

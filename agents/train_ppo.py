@@ -139,6 +139,7 @@ def train_ppo(config: PPOTrainConfig, clone_from: GoalWindows | None = None) -> 
     else:
         venv = VecNormalize(venv, norm_obs=False, norm_reward=True, gamma=PAPER_SETTINGS["gamma"])
     checkpoint = config.run_dir / "model.zip"
+    cloning_path = config.run_dir / "cloning.json"
     curve_path = config.run_dir / "curve.json"
     curve = json.loads(curve_path.read_text()) if curve_path.exists() else []
     if checkpoint.exists():
@@ -147,8 +148,8 @@ def train_ppo(config: PPOTrainConfig, clone_from: GoalWindows | None = None) -> 
     else:
         width = config.net_width
         model = PPOKL("MlpPolicy", venv, kl_prior_coef=config.alpha, anchor_coef=config.anchor, n_steps=config.n_steps,
-                      batch_size=config.batch_size,
-                      n_epochs=config.n_epochs, learning_rate=config.learning_rate, seed=config.seed, device="cpu",
+                      batch_size=config.batch_size, n_epochs=config.n_epochs, learning_rate=config.learning_rate,
+                      seed=config.seed, device="cpu",
                       tensorboard_log=str(config.run_dir / "tensorboard"),
                       policy_kwargs={"net_arch": {"pi": [width, width], "vf": [width, width]},
                                      "log_std_init": config.log_std_init})  # fmt: skip
@@ -159,7 +160,6 @@ def train_ppo(config: PPOTrainConfig, clone_from: GoalWindows | None = None) -> 
             print("cloned data latents: " + ", ".join(f"{k} {v:.4f}" for k, v in cloning.items()), file=sys.stderr)
             if config.anchor > 0:
                 model.policy.set_anchor()
-            cloning_path = config.run_dir / "cloning.json"
             atomic_write(cloning_path, lambda file: file.write(json.dumps(cloning).encode()))
     callback = CurveCallback(config.run_dir, config.checkpoint_minutes, curve)
     remaining = config.total_timesteps - model.num_timesteps
@@ -175,7 +175,6 @@ def train_ppo(config: PPOTrainConfig, clone_from: GoalWindows | None = None) -> 
     entry = {"kind": "ppo_policy", "config": {k: str(v) if isinstance(v, Path) else v for k, v in asdict(config).items()},
              "timesteps": int(model.num_timesteps), "curve": curve, "torch": str(torch.__version__),
              "shipped": f"best window: {best['timesteps']} steps" if config.ship == "best" and best else "last"}  # fmt: skip
-    cloning_path = config.run_dir / "cloning.json"
     if cloning_path.exists():
         entry["cloning"] = json.loads(cloning_path.read_text())
     record_in_manifest(weights, entry)

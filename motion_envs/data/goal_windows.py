@@ -52,12 +52,12 @@ def goal_windows(clips: MarkerClips, settings: GoalWindowSettings = GoalWindowSe
     clip_end = clips.clip_start[torch.searchsorted(clips.clip_start, starts, right=True)]
     generator = torch.Generator().manual_seed(settings.seed)
     low, high = settings.horizon_frames
+    reached_from = clips.joints[starts + PRIMITIVE_FRAMES - 1, PELVIS, :2]
     chosen, goals = [], []
     for _ in range(settings.goals_per_window):
         later = torch.randint(low, high + 1, (len(starts),), generator=generator)
         goal = clips.joints[torch.minimum(starts + PRIMITIVE_FRAMES - 1 + later, clip_end - 1), PELVIS].clone()
         goal[:, 2] = 0.0
-        reached_from = clips.joints[starts + PRIMITIVE_FRAMES - 1, PELVIS, :2]
         far = (goal[:, :2] - reached_from).norm(dim=-1) >= settings.min_goal_distance
         chosen.append(starts[far])
         goals.append(goal[far])

@@ -34,6 +34,7 @@ Node cost (lower is better; the release's soft-contact cost, weights in
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Any, Callable
 
@@ -137,10 +138,9 @@ def beam_search(core: Any, start: BatchedState, proposal: Proposal, settings: Se
         history.append((live, kept // repeats, z.cpu().reshape(len(live), -1, latent_size)[rows, kept]))
         best_done, best_cost = done[rows, kept[:, :1]][:, 0], cost[rows, kept[:, :1]][:, 0]
         finished = best_done | (level == depth_limit - 1)
-        last_level[live[finished]] = level
-        reached[live[finished]] = best_done[finished]
-        final_cost[live[finished]] = best_cost[finished]
-        spread[live[finished]] = result.distance.cpu().reshape(len(live), -1)[rows, kept].mean(dim=1)[finished]
+        ended = live[finished]
+        last_level[ended], reached[ended], final_cost[ended] = level, best_done[finished], best_cost[finished]
+        spread[ended] = result.distance.cpu().reshape(len(live), -1)[rows, kept].mean(dim=1)[finished]
         if finished.all():
             break
         going = torch.nonzero(~finished).flatten()
@@ -192,8 +192,7 @@ class TreeSearch(gym.Wrapper):
         observation, info = self.env.reset(**kwargs)
         unwrapped = self.env.unwrapped
         remaining = unwrapped.core.config.max_primitives - int(unwrapped.state.steps[0])
-        settings = SearchSettings(self.settings.roots, self.settings.children, self.settings.keep,
-                                  min(self.settings.max_depth or remaining, remaining), self.settings.cost)  # fmt: skip
+        settings = dataclasses.replace(self.settings, max_depth=min(self.settings.max_depth or remaining, remaining))
         result = beam_search(unwrapped.core, unwrapped.state, self.proposal, settings)
         self.plan, self.played = result.latents[0, : int(result.length[0])], 0
         info["search"] = {"length": int(result.length[0]), "reached": bool(result.reached[0]),

@@ -18,7 +18,7 @@ import pickle
 import shutil
 import sys
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import matplotlib
@@ -42,6 +42,9 @@ from motion_envs.priors.training import WEIGHTS_DIR, record_in_manifest  # noqa:
 class PPOTrainConfig:
     env_id: str = "motion_envs/GammaReach-v0"
     reward: str = "paper"
+    """The env's reward spec (GammaReach: "paper", "release", "paper:goal=5"; WandrReach: "default")."""
+    env_kwargs: dict = field(default_factory=dict)
+    """Further `gym.make` arguments of the env (e.g. WandrReach's frames_per_step)."""
     alpha: float = 10.0
     num_envs: int = 256
     """Bodies per rollout: 256 × 60 primitives = 15,360 samples per update, the paper's 8 episodes × 32 clones × 60."""
@@ -131,7 +134,7 @@ def train_ppo(config: PPOTrainConfig, clone_from: GoalWindows | None = None) -> 
     config.run_dir.mkdir(parents=True, exist_ok=True)
     torch.manual_seed(config.seed)
     venv = VecMonitor(NativeVecEnv.make(config.env_id, num_envs=config.num_envs, reward=config.reward,
-                                        bootstrap_truncation=config.bootstrap_truncation))  # fmt: skip
+                                        bootstrap_truncation=config.bootstrap_truncation, **config.env_kwargs))  # fmt: skip
     venv.seed(config.seed)
     statistics = config.run_dir / "vecnormalize.pkl"
     if statistics.exists():

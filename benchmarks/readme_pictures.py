@@ -2,6 +2,8 @@
 
 GammaReach-v0: one episode of the shipped α = 1 PPO policy (seed 3), four
 frames of its ray-cast video side by side -> `docs/gamma_reach.png`.
+WandrReach-v0: WANDR's sampler reaching a goal 1.5 m ahead at chest height
+(seed 0) -> `docs/wandr_reach.png`.
 """
 
 from __future__ import annotations
@@ -20,16 +22,27 @@ DOCS = Path(__file__).resolve().parent.parent / "docs"
 POLICY = WEIGHTS_DIR / "ppo_gammareach_alpha1_paper.zip"
 
 
-def gamma_reach_strip(destination: Path = DOCS / "gamma_reach.png", seed: int = 3) -> Path:
+def episode_strip(env_id: str, destination: Path, seed: int, **play_kwargs) -> Path:
+    """Four frames of one played episode side by side, half size."""
     with tempfile.TemporaryDirectory() as folder:
         video = Path(folder) / "episode.mp4"
-        (summary,) = play("motion_envs/GammaReach-v0", policy=POLICY, video=video, seed=seed)
+        (summary,) = play(env_id, video=video, seed=seed, **play_kwargs)
         frames = iio.imread(video)
     picks = np.linspace(0, len(frames) - 1, 4).round().astype(int)
-    strip = np.concatenate([frames[i, 40:-40] for i in picks], axis=1)[::2, ::2]  # half size
-    print(f"GammaReach-v0, {POLICY.name}: {summary}")
+    strip = np.concatenate([frames[i, 40:-40] for i in picks], axis=1)[::2, ::2]
+    print(f"{env_id}: {summary}")
     return atomic_write(destination, lambda file: iio.imwrite(file, strip, extension=".png"))
+
+
+def gamma_reach_strip(destination: Path = DOCS / "gamma_reach.png", seed: int = 3) -> Path:
+    return episode_strip("motion_envs/GammaReach-v0", destination, seed, policy=POLICY)
+
+
+def wandr_reach_strip(destination: Path = DOCS / "wandr_reach.png", seed: int = 0) -> Path:
+    return episode_strip("motion_envs/WandrReach-v0", destination, seed, goal_angle=(0.0, 0.0),
+                         goal_height=(1.2, 1.2), goal_distance=(1.5, 1.5))  # fmt: skip
 
 
 if __name__ == "__main__":
     print(gamma_reach_strip())
+    print(wandr_reach_strip())

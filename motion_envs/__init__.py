@@ -15,6 +15,10 @@ ENV_SPECS: dict[str, tuple[str, str]] = {
         "motion_envs.envs.gamma_reach:GammaReachEnv",
         "motion_envs.envs.gamma_reach:GammaReachVectorEnv",
     ),
+    "motion_envs/WandrReach-v0": (
+        "motion_envs.envs.wandr_reach:WandrReachEnv",
+        "motion_envs.envs.wandr_reach:WandrReachVectorEnv",
+    ),
 }
 """Environment id -> (entry point, native vector entry point)."""
 

@@ -47,6 +47,13 @@ def _bench_gamma(args: argparse.Namespace) -> int:
     return gamma_control(pairs=args.pairs, clones=args.clones, seed=args.seed, quick=args.quick, bf16=args.bf16)
 
 
+def _bench_wandr(args: argparse.Namespace) -> int:
+    from benchmarks.wandr_grid import main as wandr_grid
+
+    return wandr_grid(quick=args.quick, seed=args.seed, data_fs=not args.no_data_fs, optimisation=not args.no_optimisation,
+                      variants_dir=args.variants_dir)  # fmt: skip
+
+
 def _bench_speed(args: argparse.Namespace) -> int:
     from benchmarks.throughput import main as throughput
 
@@ -82,7 +89,8 @@ def _train_ppo(args: argparse.Namespace) -> int:
     given = {"env_id": args.env, "reward": args.reward, "alpha": args.alpha, "num_envs": args.num_envs,
              "total_timesteps": args.timesteps, "run_dir": args.run_dir, "weights": args.weights, "seed": args.seed,
              "init": args.init, "log_std_init": args.log_std_init, "learning_rate": args.learning_rate,
-             "n_steps": args.n_steps, "anchor": args.anchor}  # fmt: skip
+             "n_steps": args.n_steps, "anchor": args.anchor,
+             "env_kwargs": dict(_env_option(option) for option in args.env_option) or None}  # fmt: skip
     config = PPOTrainConfig(command="motion-envs " + " ".join(sys.argv[1:]),
                             **{name: value for name, value in given.items() if value is not None})  # fmt: skip
     if config.run_dir == PPOTrainConfig.run_dir:
@@ -102,9 +110,22 @@ def _train_ppo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _env_option(option: str) -> tuple[str, object]:
+    """'key=value' -> (key, value as JSON if it parses, else the string)."""
+    key, equals, value = option.partition("=")
+    if not equals or not key:
+        raise SystemExit(f"--env-option must look like key=value, got {option!r}")
+    try:
+        return key, json.loads(value)
+    except json.JSONDecodeError:
+        return key, value
+
+
 def _train(args: argparse.Namespace) -> int:
     if args.what == "ppo":
         return _train_ppo(args)
+    if args.what == "wandr":
+        return _train_wandr(args)
     if args.what != "gamma":
         return _not_yet(f"train {args.what}")(args)
     stages = {"predictor": _train_gamma_predictor, "regressor": _train_gamma_regressor, "pose-vae": _train_gamma_pose_vae,
@@ -121,6 +142,35 @@ def _train(args: argparse.Namespace) -> int:
     for name, value in entry.items():
         if name.startswith("validation"):
             print(f"{name}: {json.dumps(value)}")
+    return 0
+
+
+def _train_wandr(args: argparse.Namespace) -> int:
+    from motion_envs.body import BodyModel
+    from motion_envs.data.build import build
+    from motion_envs.data.dataset import MotionDataset
+    from motion_envs.priors.train_wandr import WandrClips, WandrTrainConfig, default_weights, train_wandr
+    from motion_envs.priors.wandr import WandrConfig
+    from motion_envs.priors.wandr_features import FPS
+
+    subsets = tuple(dict.fromkeys(args.subset))  # `--subset hdm05` adds to the default cmu
+    dataset = MotionDataset.load(build(mocap_dir=args.mocap_dir, cache_dir=args.cache_dir, subsets=subsets,
+                                       fps_list=(FPS,)).caches[FPS])  # fmt: skip
+    intentions = tuple(args.intentions.split(",")) if args.intentions else WandrConfig().intentions
+    model = WandrConfig(intentions=intentions, **({"layers": args.layers} if args.layers else {}))
+    name = default_weights(model, subsets)
+    given = {"epochs": args.epochs, "batch_size": args.batch_size, "window_stride": args.window_stride,
+             "seed": args.seed, "max_rollout": args.max_rollout, "kl_weight": args.kl_weight,
+             "late_kl_weight": args.late_kl_weight, "kl_raise_epoch": args.kl_raise_epoch, "weights": args.weights or name, "run_dir": args.run_dir or Path("runs") / name.stem}  # fmt: skip
+    config = WandrTrainConfig(model=model, data_hash=dataset.path.stem, command="motion-envs " + " ".join(sys.argv[1:]),
+                              **{key: value for key, value in given.items() if value is not None})  # fmt: skip
+    body = BodyModel()
+    entry = train_wandr(config, WandrClips.from_dataset(dataset, "train", body, mirrored=True),
+                        WandrClips.from_dataset(dataset, "validation", body))  # fmt: skip
+    for key, value in entry.items():
+        if key.startswith("validation"):
+            print(f"{key}: {json.dumps(value)}")
+    print(f"weights {config.weights}")
     return 0
 
 
@@ -220,7 +270,7 @@ def parser() -> argparse.ArgumentParser:
     starts.set_defaults(run=_data_start_poses)
 
     train = commands.add_parser("train", help="train a prior or a policy (resumable: rerun the same command)")
-    train.add_argument("what", help="gamma | ppo | wandr | clops | dqn (gamma and ppo so far)")
+    train.add_argument("what", help="gamma | ppo | wandr | clops | dqn (gamma, ppo and wandr so far)")
     train.add_argument("--stage", default="predictor", help="gamma: predictor | regressor | pose-vae | g-cvae")
     train.add_argument("--seed-frames", type=int, default=2, choices=(1, 2), help="predictor: seed frames")
     train.add_argument("--epochs", type=int, default=None, help="epochs (predictor: single-primitive epochs)")
@@ -240,6 +290,15 @@ def parser() -> argparse.ArgumentParser:
     train.add_argument("--learning-rate", type=float, default=None, help="ppo: Adam learning rate")
     train.add_argument("--n-steps", type=int, default=None, help="ppo: primitives per body per rollout")
     train.add_argument("--anchor", type=float, default=None, help="ppo: weight of KL to the cloned policy (default 0)")
+    train.add_argument("--env-option", action="append", default=[], metavar="KEY=VALUE",
+                       help="ppo: a further gym.make argument of the env, e.g. frames_per_step=2 (repeatable)")
+    train.add_argument("--intentions", default=None,
+                       help="wandr: intention components, comma-separated (default wrist,pelvis,orientation)")
+    train.add_argument("--layers", type=int, default=None, help="wandr: Linear layers of encoder and decoder (default 8)")
+    train.add_argument("--max-rollout", type=int, default=None, help="wandr: longest training rollout in frames (default 10)")
+    train.add_argument("--kl-weight", type=float, default=None, help="wandr: β of the KL term (paper 0.01)")
+    train.add_argument("--late-kl-weight", type=float, default=None, help="wandr: β from --kl-raise-epoch on")
+    train.add_argument("--kl-raise-epoch", type=int, default=None, help="wandr: first epoch of --late-kl-weight")
     train.add_argument("--seed", type=int, default=None)
     _add_data_args(train, ["cmu"])
     train.set_defaults(run=_train)
@@ -257,6 +316,14 @@ def parser() -> argparse.ArgumentParser:
     bench_gamma.add_argument("--bf16", action="store_true", help="add a row with the prior's networks in bf16")
     bench_gamma.add_argument("--seed", type=int, default=0)
     bench_gamma.set_defaults(run=_bench_gamma)
+    bench_wandr = bench.add_parser("wandr", help="WANDR goal reaching (the paper's 3,750-rollout grid) with the shipped weights")
+    bench_wandr.add_argument("--quick", action="store_true", help="2 start poses x 1 sample (250 rollouts)")
+    bench_wandr.add_argument("--seed", type=int, default=0)
+    bench_wandr.add_argument("--no-data-fs", action="store_true", help="skip the data's FS row (needs the mocap folder)")
+    bench_wandr.add_argument("--no-optimisation", action="store_true", help="skip the latent-optimisation rows (slowest)")
+    bench_wandr.add_argument("--variants-dir", type=Path, default=Path("runs/wandr_weights"),
+                             help="ablation / data-variant weights to add as rows (not shipped)")
+    bench_wandr.set_defaults(run=_bench_wandr)
     bench.add_parser("speed", help="GAMMA rollout body-primitives/s by batch, fp32 and bf16 (throughput.md)").set_defaults(
         run=_bench_speed
     )
@@ -271,9 +338,10 @@ def parser() -> argparse.ArgumentParser:
     realism.set_defaults(run=_bench_gamma_realism)
 
     play = commands.add_parser("play", help="run episodes with a policy or baseline; write a video and a summary")
-    play.add_argument("env_id", help="e.g. motion_envs/GammaReach-v0")
+    play.add_argument("env_id", help="motion_envs/GammaReach-v0 or motion_envs/WandrReach-v0")
     play.add_argument("--policy", type=Path, default=None, help="a saved PPOKL policy (.zip)")
-    play.add_argument("--baseline", default=None, help="random | greedy-reward | greedy-distance (default random)")
+    play.add_argument("--baseline", default=None,
+                      help="GammaReach: random | greedy-reward | greedy-distance (default random); WandrReach: sampler")
     play.add_argument("--video", type=Path, default=None, help="write an mp4 of every generated frame")
     play.add_argument("--seed", type=int, default=0)
     play.add_argument("--episodes", type=int, default=1)

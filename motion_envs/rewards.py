@@ -26,7 +26,9 @@ avoid the goal.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, fields, replace
+from typing import TypeVar
 
 import torch
 
@@ -63,23 +65,31 @@ class RewardConfig:
     @classmethod
     def named(cls, spec: str) -> RewardConfig:
         """'paper' or 'release', optionally with fields changed: 'paper:goal=5,orientation=0.5'."""
-        configs = {"paper": cls.paper, "release": cls.release}
-        name, _, changes = spec.partition(":")
-        if name not in configs:
-            raise ValueError(f"unknown reward config {name!r}; choose from {sorted(configs)} (then :field=value,...)")
-        config = configs[name]()
-        for change in filter(None, changes.split(",")):
-            field, _, value = change.partition("=")
-            if field not in {f.name for f in fields(cls)} or not value:
-                raise ValueError(f"bad reward change {change!r} in {spec!r}; fields: {[f.name for f in fields(cls)]}")
-            kind = type(getattr(config, field))
-            config = replace(config, **{field: value.lower() in ("1", "true") if kind is bool else kind(value)})
-        return config
+        return named_config(spec, {"paper": cls.paper, "release": cls.release})
 
     @property
     def best_step_reward(self) -> float:
         """The largest reward one primitive can earn (every term 1)."""
         return self.path + self.orientation + self.contact + self.pose_prior + self.goal
+
+
+Config = TypeVar("Config")
+
+
+def named_config(spec: str, presets: dict[str, Callable[[], Config]]) -> Config:
+    """A preset by name with fields changed after a colon: 'name:field=value,field=value'."""
+    name, _, changes = spec.partition(":")
+    if name not in presets:
+        raise ValueError(f"unknown reward config {name!r}; choose from {sorted(presets)} (then :field=value,...)")
+    config = presets[name]()
+    names = [f.name for f in fields(config)]
+    for change in filter(None, changes.split(",")):
+        field, _, value = change.partition("=")
+        if field not in names or not value:
+            raise ValueError(f"bad reward change {change!r} in {spec!r}; fields: {names}")
+        kind = type(getattr(config, field))
+        config = replace(config, **{field: value.lower() in ("1", "true") if kind is bool else kind(value)})
+    return config
 
 
 def _unit(vectors: torch.Tensor) -> torch.Tensor:
@@ -137,3 +147,35 @@ def goal_settlement(steps: torch.Tensor, final_goal_reward: torch.Tensor, paid: 
 def goal_absorbing_reward(succeeded: torch.Tensor, remaining_steps: torch.Tensor, best_step_reward: float) -> torch.Tensor:
     """On success (N,) bool, the remaining primitives (N,) paid at `best_step_reward` each (see module doc)."""
     return succeeded.to(remaining_steps.dtype) * remaining_steps * best_step_reward
+
+
+@dataclass(frozen=True)
+class WandrRewardConfig:
+    """Scales of WandrReach's reward terms (ours: the WANDR paper trains no policy and has no reward).
+
+    r = progress · wrist_progress + success · reached − skating · skated − latent · latent_cost
+    """
+
+    progress: float = 10.0
+    """Per metre the right wrist comes closer to the goal (a 5 m reach earns about 50)."""
+    success: float = 10.0
+    """Once, on the frame the wrist first comes within the success radius."""
+    skating: float = 0.1
+    """Per frame whose lowest foot vertex slides more than WANDR's FS threshold."""
+    latent: float = 0.01
+    """Times the mean square of z: keeps actions where the prior was trained (N(0, I))."""
+
+    @classmethod
+    def named(cls, spec: str) -> WandrRewardConfig:
+        """'default', optionally with fields changed: 'default:success=5,skating=0.5'."""
+        return named_config(spec, {"default": cls})
+
+
+def wrist_progress(previous_distance: torch.Tensor, distance: torch.Tensor) -> torch.Tensor:
+    """(N,) metres the wrist came closer to the goal this step (negative when it moved away)."""
+    return previous_distance - distance
+
+
+def latent_cost(z: torch.Tensor) -> torch.Tensor:
+    """(N, D) latents -> (N,) mean square, 1 for typical draws from N(0, I)."""
+    return (z**2).mean(dim=-1)

@@ -34,12 +34,23 @@ def generator() -> torch.Generator:
     return torch.Generator().manual_seed(0)
 
 
-@pytest.fixture(scope="session")
-def walking_clips(mocap_dir, body):
-    """One real CMU walking clip (07_01) as 40 fps markers."""
+def _walking_motion(mocap_dir, body, fps: int):
     from motion_envs.data.build import find_sources, load_clip
-    from motion_envs.data.primitives import MarkerClips
     from motion_envs.data.retarget import RetargetConfig
 
     source = next(s for s in find_sources(mocap_dir) if s.relative == "cmu/07_01.bvh")
-    return MarkerClips.from_motions([load_clip(source, 40, body, RetargetConfig(iterations=60))], body)
+    return load_clip(source, fps, body, RetargetConfig(iterations=60))
+
+
+@pytest.fixture(scope="session")
+def walking_clips(mocap_dir, body):
+    """One real CMU walking clip (07_01) as 40 fps markers."""
+    from motion_envs.data.primitives import MarkerClips
+
+    return MarkerClips.from_motions([_walking_motion(mocap_dir, body, 40)], body)
+
+
+@pytest.fixture(scope="session")
+def walking_motion_30fps(mocap_dir, body):
+    """The same clip as body motion at 30 fps (WANDR's rate)."""
+    return _walking_motion(mocap_dir, body, 30)

@@ -36,7 +36,7 @@ def test_cli_help_lists_the_subcommands():
 
 def test_cli_reports_unfinished_subcommands_clearly():
     result = subprocess.run(
-        [sys.executable, "-m", "motion_envs.cli", "train", "wandr"], capture_output=True, text=True, timeout=60
+        [sys.executable, "-m", "motion_envs.cli", "train", "clops"], capture_output=True, text=True, timeout=60
     )
     assert result.returncode == 2
     assert "not available yet" in result.stderr

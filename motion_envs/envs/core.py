@@ -1,11 +1,17 @@
-"""What every environment shares: checked actions and configs built from `gym.make` kwargs."""
+"""What every environment shares: checked actions, configs built from `gym.make` kwargs, and the native
+vector env over a batched core."""
 
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, TypeVar
+from typing import Any, Protocol, TypeVar
 
+import gymnasium as gym
 import numpy as np
+import torch
+from gymnasium.vector import AutoresetMode, VectorEnv
+
+from motion_envs.batched import BatchedState
 
 Config = TypeVar("Config")
 
@@ -33,3 +39,67 @@ def config_from_kwargs(config_type: type[Config], kwargs: dict[str, Any], env_na
     if unknown:
         raise TypeError(f"{env_name} got unknown arguments {unknown}; valid: {sorted(valid)}")
     return config_type(**kwargs)
+
+
+class BatchedCore(Protocol):
+    """What `CoreVectorEnv` needs of an environment's batched core."""
+
+    device: torch.device
+
+    def sample_initial_state(self, rngs: list[np.random.Generator], options: dict[str, Any] | None = None) -> Any: ...
+
+    def observe(self, state: Any) -> torch.Tensor: ...
+
+    def step(self, state: Any, z: torch.Tensor) -> tuple[Any, Any]: ...
+
+
+class CoreVectorEnv(VectorEnv):
+    """N bodies of one batched core; same-step autoreset (ended bodies restart at once, without options,
+    as Gymnasium's own vector envs do; their last observation and info are in `info["final_obs"]` /
+    `info["final_info"]`). Subclasses build the core and say what goes into `info` (`_step_info`)."""
+
+    metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
+
+    def __init__(self, core: BatchedCore, num_envs: int, single_action_space: gym.spaces.Box,
+                 single_observation_space: gym.spaces.Box) -> None:  # fmt: skip
+        self.core = core
+        self.num_envs = num_envs
+        self.single_action_space, self.single_observation_space = single_action_space, single_observation_space
+        self.action_space = gym.vector.utils.batch_space(single_action_space, num_envs)
+        self.observation_space = gym.vector.utils.batch_space(single_observation_space, num_envs)
+        self.rngs = [np.random.default_rng() for _ in range(num_envs)]
+        self.state: BatchedState | None = None
+
+    def reset(self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None):
+        if seed is not None:
+            seeds = seed if isinstance(seed, list) else [seed + i for i in range(self.num_envs)]
+            self.rngs = [np.random.default_rng(s) for s in seeds]  # body i follows the single env reset with seed + i
+        self.state = self.core.sample_initial_state(self.rngs, options)
+        return self.core.observe(self.state).cpu().numpy(), {}
+
+    def _step_info(self, result: Any) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        """(info of every body, final info of the bodies that ended: arrays over all bodies, with is_success)."""
+        raise NotImplementedError
+
+    def step(self, actions: np.ndarray):
+        if self.state is None:
+            raise RuntimeError("call reset() before step()")
+        z = check_actions(actions, self.single_action_space.shape, batch=self.num_envs)
+        self.state, result = self.core.step(self.state, torch.as_tensor(z))
+        done = (result.terminated | result.truncated).cpu()
+        observation = self.core.observe(self.state).cpu().numpy()
+        info, final = self._step_info(result)
+        if done.any():
+            ended = torch.nonzero(done).flatten()
+            info["final_obs"] = np.empty(self.num_envs, dtype=object)  # one array per ended body, None elsewhere
+            for i in ended.tolist():
+                info["final_obs"][i] = observation[i]
+            info["final_info"] = {**final, **{f"_{name}": done.numpy() for name in final}}
+            info["_final_obs"] = info["_final_info"] = done.numpy()
+            fresh = self.core.sample_initial_state([self.rngs[i] for i in ended.tolist()])
+            order = torch.zeros(self.num_envs, dtype=torch.long)
+            order[ended] = torch.arange(len(ended))  # fresh body k goes to row ended[k]; other rows are masked
+            self.state = self.state.replace_bodies(done.to(self.core.device), fresh.index(order.to(self.core.device)))
+            observation = self.core.observe(self.state).cpu().numpy()
+        return (observation, result.reward.cpu().numpy().astype(np.float64), result.terminated.cpu().numpy(),
+                result.truncated.cpu().numpy(), info)  # fmt: skip

@@ -73,13 +73,12 @@ import gymnasium as gym
 import numpy as np
 import roma
 import torch
-from gymnasium.vector import AutoresetMode, VectorEnv
 
 from motion_envs.batched import BatchedState
 from motion_envs.body.markers import foot_vertex_ids
 from motion_envs.data.primitives import GAMMA_FPS
 from motion_envs.data.start_poses import load_start_poses
-from motion_envs.envs.core import check_actions, config_from_kwargs
+from motion_envs.envs.core import CoreVectorEnv, check_actions, config_from_kwargs
 from motion_envs.metrics import contact_score, marker_speeds
 from motion_envs.priors.canonical import PELVIS, goal_observation
 from motion_envs.priors.gamma_generator import GammaGenerator, GammaSeed, Primitive
@@ -328,60 +327,22 @@ class GammaReachEnv(gym.Env):
         return self.core.observe(self.state)[0].cpu().numpy().astype(np.float32)
 
 
-class GammaReachVectorEnv(VectorEnv):
-    """N bodies in one batched core; same-step autoreset (ended bodies restart at once;
-    their last observation and info are in `info["final_obs"]` / `info["final_info"]`)."""
-
-    metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
+class GammaReachVectorEnv(CoreVectorEnv):
+    """N bodies in one batched core; same-step autoreset (see `CoreVectorEnv`)."""
 
     def __init__(self, num_envs: int = 1, generator: GammaGenerator | None = None, **kwargs: Any) -> None:
         self.config = config_from_kwargs(GammaReachConfig, kwargs, "GammaReach-v0")
-        self.core = GammaReachCore(self.config, generator)
-        self.num_envs = num_envs
+        core = GammaReachCore(self.config, generator)
         bound = self.config.latent_bound
-        self.single_action_space = gym.spaces.Box(-bound, bound, (self.core.generator.latent_size,), np.float32)
-        self.single_observation_space = gym.spaces.Box(-np.inf, np.inf, (OBSERVATION_SIZE,), np.float32)
-        self.action_space = gym.vector.utils.batch_space(self.single_action_space, num_envs)
-        self.observation_space = gym.vector.utils.batch_space(self.single_observation_space, num_envs)
-        self.rngs = [np.random.default_rng() for _ in range(num_envs)]
-        self.state: GammaReachState | None = None
+        super().__init__(core, num_envs, gym.spaces.Box(-bound, bound, (core.generator.latent_size,), np.float32),
+                         gym.spaces.Box(-np.inf, np.inf, (OBSERVATION_SIZE,), np.float32))  # fmt: skip
         self.last_primitive: Primitive | None = None
 
-    def reset(self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None):
-        if seed is not None:
-            seeds = seed if isinstance(seed, list) else [seed + i for i in range(self.num_envs)]
-            self.rngs = [np.random.default_rng(s) for s in seeds]  # body i follows the single env reset with seed + i
-        self.state = self.core.sample_initial_state(self.rngs, options)
-        return self.core.observe(self.state).cpu().numpy(), {}
-
-    def step(self, actions: np.ndarray):
-        if self.state is None:
-            raise RuntimeError("call reset() before step()")
-        z = check_actions(actions, self.single_action_space.shape, batch=self.num_envs)
-        self.state, result = self.core.step(self.state, torch.as_tensor(z))
+    def _step_info(self, result: GammaStepResult) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         self.last_primitive = result.primitive
-        done = (result.terminated | result.truncated).cpu()
-        observation = self.core.observe(self.state).cpu().numpy()
         info: dict[str, Any] = {name: value.cpu().numpy() for name, value in
                                 (("distance", result.distance), ("reached", result.reached),
                                  ("contact_score", result.contact_score))}  # fmt: skip
         info["reward_terms"] = {name: value.cpu().numpy() for name, value in result.terms.items()}
-        if done.any():
-            ended = torch.nonzero(done).flatten()
-            info["final_obs"] = np.empty(self.num_envs, dtype=object)  # one array per ended body, None elsewhere
-            for i in ended.tolist():
-                info["final_obs"][i] = observation[i]
-            info["final_info"] = {"is_success": result.reached.cpu().numpy() & done.numpy(), "_is_success": done.numpy()}
-            info["_final_obs"] = info["_final_info"] = done.numpy()
-            fresh = self.core.sample_initial_state([self.rngs[i] for i in ended.tolist()])
-            self.state = self.state.replace_bodies(done.to(self.core.device), _scatter(self.state, fresh, ended))
-            observation = self.core.observe(self.state).cpu().numpy()
-        return (observation, result.reward.cpu().numpy().astype(np.float64), result.terminated.cpu().numpy(),
-                result.truncated.cpu().numpy(), info)  # fmt: skip
-
-
-def _scatter(state: GammaReachState, fresh: GammaReachState, rows: torch.Tensor) -> GammaReachState:
-    """A full-size state holding `fresh`'s bodies at `rows` (other rows: anything; they get masked)."""
-    order = torch.zeros(state.num_bodies, dtype=torch.long)
-    order[rows] = torch.arange(len(rows))
-    return fresh.index(order.to(state.steps.device))
+        done = (result.terminated | result.truncated).cpu().numpy()
+        return info, {"is_success": result.reached.cpu().numpy() & done}

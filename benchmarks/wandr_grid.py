@@ -1,0 +1,257 @@
+"""WANDR's goal-reaching benchmark (`motion-envs bench wandr`): the paper's protocol (Sec. 4.2-4.3).
+
+Goals on a cylinder around each start body: 5 angles equally spaced over
+360° (from the body's forward), 5 heights in 0-1.8 m, 5 ground distances in
+0.5-5 m from the pelvis; 6 start poses (evenly spread over the shipped
+30 fps validation start windows, each facing +y); 5 samples each:
+3,750 rollouts of at most 8 s (240 frames) in one batch. Per row:
+
+* SR: the right wrist came within 10 cm of the goal (the rollout stops there);
+* FS: frames whose lowest foot vertex slid more than 0.66 cm (WANDR's
+  threshold at 30 fps), % of all frames generated;
+* DTG: the closest the wrist came to the goal, cm, mean over rollouts.
+
+Rows: the WANDR sampler (z ~ N(0, I) every frame) on the shipped prior and
+on every ablation / data variant whose weights are in `runs/wandr_weights/`
+(`--variants-dir`; they are trained with `motion-envs train wandr
+--intentions ... --weights runs/wandr_weights/NAME.pt` and not shipped); the shipped prior without `ground_feet` (the prior alone);
+latent optimisation (`baselines.latent_optimisation`: "VAE + opt" with a
+zero intention from random latents, "WANDR + opt" refining the sampler's
+latents) on 2 start poses × 1 sample (250 rollouts: it backpropagates
+through 240 frames, ~5 min a row on 2 cores); a shipped WandrReach PPO policy if there is one; and
+the data's own FS (test clips, when the mocap cache can be built). Writes
+`benchmarks/results/wandr_grid.md`, `wandr_grid.png` (the paper's Figure 5:
+SR by height, angle and distance) and the prior's decode throughput into
+`benchmarks/results/throughput.md`.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import torch  # noqa: E402
+
+from baselines.latent_optimisation import LatentSequence, optimise_latents  # noqa: E402
+from baselines.wandr_sampler import Controller, WandrSampler, roll_out  # noqa: E402
+from benchmarks.machine import machine_line  # noqa: E402
+from benchmarks.sections import replace_section  # noqa: E402
+from motion_envs.atomic import atomic_write  # noqa: E402
+from motion_envs.envs.wandr_reach import WandrReachConfig, WandrReachCore, WandrReachState  # noqa: E402
+from motion_envs.priors.train_wandr import load_wandr  # noqa: E402
+from motion_envs.priors.training import WEIGHTS_DIR  # noqa: E402
+from motion_envs.priors.wandr import WandrStepper  # noqa: E402
+
+RESULTS = Path(__file__).resolve().parent / "results"
+ANGLES, HEIGHTS, DISTANCES = 5, 5, 5
+HEIGHT_RANGE, DISTANCE_RANGE = (0.0, 1.8), (0.5, 5.0)
+PAPER_ROWS = {  # WANDR Tables 1 and 2: SR %, FS %, DTG cm
+    "WANDR (paper)": (32, 16, 24.8),
+    "WANDR, I^w only (paper)": (15, 13, 62.9),
+    "WANDR, I^w + I^p (paper)": (18, 17, 44.9),
+    "WANDR, I^w + I^r (paper)": (19, 19, 36.0),
+    "VAE + opt (paper)": (3, 4, 217.0),
+    "WANDR trained on AMASS only (paper)": (16, 19, 48.0),
+}
+VARIANTS_DIR = Path("runs/wandr_weights")
+VARIANTS = {  # weights file -> row label
+    "wandr_wrist.pt": "WANDR sampler, I^w only",
+    "wandr_wrist_pelvis.pt": "WANDR sampler, I^w + I^p",
+    "wandr_wrist_orientation.pt": "WANDR sampler, I^w + I^r",
+    "wandr_cmu_hdm05.pt": "WANDR sampler, trained on cmu + hdm05",
+}
+
+
+def grid_values() -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """The paper's 5 angles (rad), 5 heights (m) and 5 distances (m)."""
+    angles = torch.arange(ANGLES) * (2 * math.pi / ANGLES)
+    return angles, torch.linspace(*HEIGHT_RANGE, HEIGHTS), torch.linspace(*DISTANCE_RANGE, DISTANCES)
+
+
+def grid_start(core: WandrReachCore, poses: int, samples: int) -> tuple[WandrReachState, dict[str, torch.Tensor]]:
+    """Every (pose, angle, height, distance, sample) as one batch; returns the state and each body's grid cell."""
+    angles, heights, distances = grid_values()
+    pose_rows = torch.linspace(0, core.num_starts - 1, poses).round().long()
+    cells = torch.cartesian_prod(torch.arange(poses), torch.arange(ANGLES), torch.arange(HEIGHTS), torch.arange(DISTANCES),
+                                 torch.arange(samples))  # fmt: skip
+    start_index, facing = pose_rows[cells[:, 0]], torch.zeros(len(cells))
+    goals = core.cylinder_goals(start_index, facing, angles[cells[:, 1]], heights[cells[:, 2]], distances[cells[:, 3]])
+    state = core.initial_state(start_index, facing, goals[:, None])
+    return state, {"angle": cells[:, 1], "height": cells[:, 2], "distance": cells[:, 3]}
+
+
+def evaluate(core: WandrReachCore, start: WandrReachState, controller: Controller) -> dict:
+    """SR, FS and DTG of one controller over the batch, with wall time."""
+    began = time.perf_counter()
+    final = roll_out(core, start, controller, progress=True)
+    seconds = time.perf_counter() - began
+    return {"SR": 100 * float(final.reached.float().mean()), "FS": 100 * float(final.skated.sum() / final.frame.sum()),
+            "DTG": 100 * float(final.closest.mean()), "reached": final.reached.cpu(), "seconds": seconds,
+            "frames": int(final.frame.sum())}  # fmt: skip
+
+
+OPTIMISATION_POSES = 2
+
+
+def optimisation_row(prior_path: Path, intentions: tuple[str, ...] | None, seed: int) -> dict:
+    """Latent optimisation from z ~ N(0, I) on `OPTIMISATION_POSES` poses × 1 sample, scored by replaying.
+
+    intentions: what the prior is shown (() for "VAE + opt", None for its own, "WANDR + opt")."""
+    core = WandrReachCore(WandrReachConfig(), prior=load_wandr(prior_path))
+    core.stepper = WandrStepper(core.prior, core.body, core.config.ground_feet, intentions)
+    start, _ = grid_start(core, OPTIMISATION_POSES, 1)
+    frames = core.config.max_frames
+    initial = torch.randn(start.num_bodies, frames, core.prior.config.latent, generator=torch.Generator().manual_seed(seed))
+    began = time.perf_counter()
+    latents = optimise_latents(core.stepper, start, frames, initial, progress=True)
+    seconds = time.perf_counter() - began
+    row = evaluate(core, start, LatentSequence(latents))
+    return {**row, "seconds": row["seconds"] + seconds}
+
+
+def data_skating(subsets: tuple[str, ...] = ("cmu",)) -> float | None:
+    """FS (%) of the test clips at 30 fps, or None when the mocap cache cannot be built here."""
+    from motion_envs.body import BodyModel
+    from motion_envs.body.markers import foot_vertex_ids
+    from motion_envs.data.build import build
+    from motion_envs.data.canonical import body_tensors
+    from motion_envs.data.dataset import MotionDataset
+    from motion_envs.metrics import foot_skating
+
+    try:
+        dataset = MotionDataset.load(build(subsets=subsets, fps_list=(30,)).caches[30])
+    except (FileNotFoundError, OSError) as error:
+        print(f"data FS skipped: {error}")
+        return None
+    body, ids, skated, frames = BodyModel(), foot_vertex_ids(), 0.0, 0
+    with torch.no_grad():
+        for clip in dataset.clips("test"):
+            flags = foot_skating(body.skin(body(*body_tensors(clip)), ids))
+            skated, frames = skated + float(flags.sum()), frames + len(flags)
+    return 100 * skated / max(frames, 1)
+
+
+@torch.no_grad()
+def decode_throughput(core: WandrReachCore, batch: int = 1024, frames: int = 30) -> dict[str, float]:
+    """Body-frames/s of the prior's step alone (decode, integrate, FK) and of the env core's step at `batch`."""
+    rows = torch.arange(batch) % core.num_starts
+    state = core.initial_state(rows, torch.zeros(batch), torch.zeros(batch, 1, 3) + torch.tensor([0.0, 3.0, 1.0]))
+    z = torch.randn(batch, core.prior.config.latent, generator=torch.Generator().manual_seed(0))
+    body = state.body
+    core.stepper.step(body, z, state.goal, state.frames_left)  # warm-up
+    began = time.perf_counter()
+    for _ in range(frames):
+        body, _ = core.stepper.step(body, z, state.goal, state.frames_left)
+    prior_rate = batch * frames / (time.perf_counter() - began)
+    began = time.perf_counter()
+    for _ in range(frames):
+        state, _ = core.step(state, z)
+    return {"prior": prior_rate, "env": batch * frames / (time.perf_counter() - began)}
+
+
+def success_by_cell(reached: torch.Tensor, cells: dict[str, torch.Tensor]) -> dict[str, np.ndarray]:
+    """SR (%) per grid value of each axis."""
+    sizes = {"angle": ANGLES, "height": HEIGHTS, "distance": DISTANCES}
+    return {axis: np.array([100 * float(reached[cells[axis] == v].float().mean()) for v in range(size)])
+            for axis, size in sizes.items()}  # fmt: skip
+
+
+def figure(by_cell: dict[str, np.ndarray], path: Path, title: str) -> None:
+    """The paper's Figure 5: SR by height, angle and distance."""
+    angles, heights, distances = grid_values()
+    ticks = {"height": [f"{h:.2f}" for h in heights.tolist()], "angle": [f"{math.degrees(a):.0f}°" for a in angles.tolist()],
+             "distance": [f"{d:.2f}" for d in distances.tolist()]}  # fmt: skip
+    fig, axes = plt.subplots(1, 3, figsize=(11, 3.2), sharey=True)
+    for axis, (name, colour) in zip(axes, (("height", "#d9a400"), ("angle", "#2e9e4f"), ("distance", "#2f6fd0"))):
+        axis.bar(ticks[name], by_cell[name], color=colour)
+        axis.set_xlabel(f"goal {name}" + (" (m)" if name != "angle" else " from the body's forward"))
+        axis.grid(axis="y", alpha=0.3)
+    axes[0].set_ylabel("success rate (%)")
+    fig.suptitle(title)
+    fig.tight_layout()
+    atomic_write(path, lambda file: fig.savefig(file, format="png", dpi=110))
+    plt.close(fig)
+
+
+def main(quick: bool = False, seed: int = 0, weights_dir: Path | None = None, policies: list[Path] | None = None,
+         data_fs: bool = True, optimisation: bool = True, variants_dir: Path = VARIANTS_DIR) -> int:  # fmt: skip
+    """Run every row, print the table, write the result files."""
+    from agents.controllers import PolicyLatent
+
+    poses, samples = (2, 1) if quick else (6, 5)
+    weights_dir = weights_dir or WEIGHTS_DIR
+    rows: dict[str, dict] = {}
+    runs: dict[str, tuple[Path, Callable[[], Controller]]] = {}
+    if (weights_dir / "wandr.pt").exists():
+        runs["WANDR sampler"] = (weights_dir / "wandr.pt", lambda: WandrSampler(seed=seed))
+    for name, label in VARIANTS.items():
+        if (variants_dir / name).exists():
+            runs[label] = (variants_dir / name, lambda: WandrSampler(seed=seed))
+    for policy in policies if policies is not None else sorted(weights_dir.glob("ppo_wandrreach*.zip")):
+        runs[f"PPO ({policy.stem})"] = (weights_dir / "wandr.pt", lambda p=policy: PolicyLatent(p, seed=seed))
+    if not runs:
+        raise FileNotFoundError(f"no WANDR weights in {weights_dir}")
+    main_cells = None
+    for label, (prior_path, make_controller) in runs.items():
+        torch.manual_seed(seed)
+        core = WandrReachCore(WandrReachConfig(), prior=load_wandr(prior_path))
+        start, cells = grid_start(core, poses, samples)
+        rows[label] = evaluate(core, start, make_controller())
+        print(f"{label}: SR {rows[label]['SR']:.1f}%  FS {rows[label]['FS']:.1f}%  DTG {rows[label]['DTG']:.1f} cm  "
+              f"({rows[label]['seconds']:.0f} s)")  # fmt: skip
+        if main_cells is None:
+            main_cells, main_label = cells, label
+    shipped = weights_dir / "wandr.pt"
+    if shipped.exists():
+        core = WandrReachCore(WandrReachConfig(ground_feet=False), prior=load_wandr(shipped))
+        rows["WANDR sampler, prior alone (no ground_feet)"] = evaluate(core, grid_start(core, poses, samples)[0],
+                                                                       WandrSampler(seed=seed))  # fmt: skip
+    if shipped.exists() and optimisation:
+        for label, intentions in ((f"VAE + opt (zero intention; {OPTIMISATION_POSES} poses × 1 sample)", ()),
+                                  (f"WANDR + opt ({OPTIMISATION_POSES} poses × 1 sample)", None)):  # fmt: skip
+            rows[label] = optimisation_row(shipped, intentions, seed)
+            print(f"{label}: SR {rows[label]['SR']:.1f}%  FS {rows[label]['FS']:.1f}%  DTG {rows[label]['DTG']:.1f} cm")
+    data = data_skating() if data_fs else None
+    throughput = decode_throughput(WandrReachCore(WandrReachConfig(), prior=load_wandr(runs[next(iter(runs))][0])))
+
+    count = len(rows[main_label]["reached"])
+    lines = [f"# WANDR goal reaching{' (quick)' if quick else ''}", "",
+             f"{count} rollouts: {ANGLES} angles × {HEIGHTS} heights ({HEIGHT_RANGE[0]}-{HEIGHT_RANGE[1]} m) × "
+             f"{DISTANCES} distances ({DISTANCE_RANGE[0]}-{DISTANCE_RANGE[1]} m) × {poses} start poses × {samples} samples, "
+             f"≤ 240 frames (8 s) each, one batch per row. `motion-envs bench wandr{' --quick' if quick else ''}`.",
+             machine_line(), "", "| row | SR (%) | FS (%) | DTG (cm) | wall time (s) |", "|---|---|---|---|---|"]  # fmt: skip
+    for label, row in rows.items():
+        lines.append(f"| {label} | {row['SR']:.1f} | {row['FS']:.1f} | {row['DTG']:.1f} | {row['seconds']:.0f} |")
+    if data is not None:
+        lines.append(f"| data (cmu test clips) | | {data:.1f} | | |")
+    for label, (sr, fs, dtg) in PAPER_ROWS.items():
+        lines.append(f"| {label} | {sr} | {fs} | {dtg} | |")
+    by_cell = success_by_cell(rows[main_label]["reached"], main_cells)
+    lines += ["", f"SR (%) of '{main_label}' by goal height (m), angle and distance (m), as the paper's Figure 5:", ""]
+    angles, heights, distances = grid_values()
+    for axis, values in (("height", heights), ("angle (°)", torch.rad2deg(angles)), ("distance", distances)):
+        key = axis.split()[0]
+        lines.append(f"- {axis}: " + ", ".join(f"{v:.2f}: {s:.0f}" for v, s in zip(values.tolist(), by_cell[key])))
+    lines += ["", f"Prior decode throughput at batch 1,024: {throughput['prior']:,.0f} body-frames/s (decode, integrate, FK); "
+              f"env core step {throughput['env']:,.0f} body-frames/s (adds feet, rewards, goals).", ""]  # fmt: skip
+    text = "\n".join(lines)
+    print(text)
+    name = "wandr_grid_quick" if quick else "wandr_grid"
+    RESULTS.mkdir(exist_ok=True)
+    atomic_write(RESULTS / f"{name}.md", lambda file: file.write(text.encode()))
+    figure(by_cell, RESULTS / f"{name}.png", f"{main_label}: success by goal position ({count} rollouts)")
+    if not quick:
+        replace_section(RESULTS / "throughput.md", "\n".join([
+            "## WANDR prior decode", "", machine_line(), "",
+            "| batch | prior step (body-frames/s) | env core step (body-frames/s) | target |", "|---|---|---|---|",
+            f"| 1,024 | {throughput['prior']:,.0f} | {throughput['env']:,.0f} | ≥ 20,000 |", "",
+            f"Whole grid ({count} rollouts of ≤ 240 frames), sampler row: {rows[main_label]['seconds']:.0f} s "
+            f"({rows[main_label]['frames'] / rows[main_label]['seconds']:,.0f} body-frames/s).", ""]))  # fmt: skip
+    return 0

@@ -1,0 +1,282 @@
+"""Training WANDR's prior (`motion-envs train wandr`).
+
+Reads top to bottom: clips -> windows with hallucinated goals -> statistics
+-> epochs of scheduled rollouts -> validation -> weights + manifest.
+
+* Goals (Sec. 3.2, hindsight): a window starting at frame s gets a goal
+  frame t_G in the future of its clip; the goal is the right wrist there and
+  the goal heading the body's heading there. The release picks t_G among
+  frames whose pelvis is ≥ 1.5 m away (REFERENCE_NOTES §2.5) because CIRCLE
+  supplies the close reaches; we have no CIRCLE, so with probability
+  `far_goal_probability` t_G is drawn that way and otherwise uniformly over
+  the next `goal_horizon` frames (reaches in place, short steps).
+* Scheduled teacher forcing (Sup. B.2): a batch rolls its windows out for
+  `steps` frames, the first from the data, later ones from the model's own
+  integrated output (the encoder sees the delta from the predicted pose to
+  the next true pose, as the release). `steps` is uniform in 1..k, and k
+  grows from 1 to `max_rollout` (10) over the first half of training.
+* KL weight: the paper's β = 0.01 gives a posterior the decoder leans on
+  (validation KL ~40 nats) and prior samples it has rarely seen: with
+  z ~ N(0, I) one decoded frame was worse than repeating the last delta
+  (joint error 2.8 cm against 1.5 cm), and sampled bodies bent out of shape
+  within 4 s. `late_kl_weight` raises β once the rollouts are long (the
+  shipped prior: 0.1 from epoch index 22 of 40; a 5-epoch trial from epoch 18
+  kept the mean joint angle at 38-41° for 6 s where β = 0.01 reached 72°).
+* Normalisation: z-scores with floors on the standard deviation, 0.05 for
+  the condition and 0.01 for the delta. Many 6-D entries barely move in the
+  data (std ~1e-3); with a tiny floor a 1 cm / 0.5° slip of the model's own
+  rollout became a 10σ input and sampled motion fell apart within 4 s
+  (pelvis height 5-95% after 8 s: −0.1 to 0.85 m with feet kept on the floor).
+* Loss (Sec. 3.4): per frame, reconstruction MSE of the normalised delta
+  (translation, orientation and pose averaged separately, then summed, as
+  the release) + joint MSE in cm through our FK; plus β·KL with free bits
+  (0.05 per dimension) and β ramped 0 → 1e-2 as the release's 2^(t/T) − 1.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from motion_envs.body import BodyModel
+from motion_envs.body.rotations import rotation_matrix
+from motion_envs.data.dataset import MotionDataset
+from motion_envs.data.motion import BodyMotion
+from motion_envs.priors.training import WEIGHTS_DIR, TrainRun, fit, load_shipped, minibatches, seed_everything, ship
+from motion_envs.priors.wandr import WandrConfig, WandrPrior
+from motion_envs.priors.wandr_features import (
+    FPS, PELVIS, RIGHT_WRIST, WandrState, condition, integrate, intention, make_state, pose_delta,
+)  # fmt: skip
+
+WANDR_KIND = "wandr"
+FAR_GOAL_DISTANCE = 1.5
+
+
+@dataclass
+class WandrTrainConfig(TrainRun):
+    """Settings of one WANDR training run (paper: 900 epochs, batch 512, lr 1e-4 → 1e-5)."""
+
+    model: WandrConfig = field(default_factory=WandrConfig)
+    epochs: int = 40
+    batch_size: int = 256
+    learning_rate: float = 3e-4
+    final_learning_rate: float = 3e-5
+    max_rollout: int = 10
+    goal_horizon: int = 8 * FPS
+    far_goal_probability: float = 0.5
+    condition_std_floor: float = 0.05
+    delta_std_floor: float = 0.01
+    kl_weight: float = 1e-2
+    kl_warmup_steps: int = 2000
+    late_kl_weight: float | None = None
+    """β from `kl_raise_epoch` on (None: `kl_weight` throughout). See the module doc."""
+    kl_raise_epoch: int = 0
+    free_bits: float = 0.05
+    window_stride: int = 1
+    run_dir: Path = Path("runs/wandr")
+
+    def rollout_limit(self, epoch: int) -> int:
+        """k of the schedule: 1 at the start, `max_rollout` from half-way on."""
+        ramp = max(1, self.epochs // 2)
+        return max(1, min(self.max_rollout, round(self.max_rollout * epoch / ramp)))
+
+    def kl_beta(self, step: int, epoch: int) -> float:
+        if self.late_kl_weight is not None and epoch >= self.kl_raise_epoch:
+            return self.late_kl_weight
+        if step >= self.kl_warmup_steps:
+            return self.kl_weight
+        return self.kl_weight * (2 ** (step / self.kl_warmup_steps) - 1)
+
+
+@dataclass(frozen=True)
+class WandrClips:
+    """Clips of one split, frames concatenated.
+
+    transl: (F, 3). orient: (F, 3, 3). pose: (F, 21, 3, 3). joints: (F, 22, 3).
+    clip_end: (F,) one past the last frame of each frame's clip.
+    """
+
+    transl: torch.Tensor
+    orient: torch.Tensor
+    pose: torch.Tensor
+    joints: torch.Tensor
+    clip_end: torch.Tensor
+
+    @classmethod
+    def from_motions(cls, clips: list[BodyMotion], body: BodyModel) -> WandrClips:
+        if not clips:
+            raise ValueError("no clips to train on")
+        if {c.fps for c in clips} != {FPS}:
+            raise ValueError(f"WANDR trains on {FPS} fps motion, got {sorted({c.fps for c in clips})} fps")
+        transl, orient, pose = (torch.as_tensor(np.concatenate([getattr(c, name) for c in clips]), dtype=torch.float32)
+                                for name in ("transl", "global_orient", "body_pose"))  # fmt: skip
+        with torch.no_grad():
+            joints = body(transl, orient, pose).joints
+        lengths = torch.tensor([c.num_frames for c in clips])
+        clip_end = torch.repeat_interleave(torch.cumsum(lengths, 0), lengths)
+        return cls(transl, rotation_matrix(orient), rotation_matrix(pose), joints, clip_end)
+
+    @classmethod
+    def from_dataset(cls, dataset: MotionDataset, split: str, body: BodyModel, mirrored: bool = False) -> WandrClips:
+        return cls.from_motions(dataset.clips(split, mirrored=mirrored), body)
+
+    def window_starts(self, steps: int, stride: int = 1) -> torch.Tensor:
+        """(W,) frames s with a previous frame in their clip and `steps` frames after them."""
+        frames = torch.arange(1, len(self.transl), stride)
+        has_previous = self.clip_end[frames - 1] == self.clip_end[frames]
+        return frames[has_previous & (frames + steps < self.clip_end[frames])]
+
+    def state(self, frames: torch.Tensor) -> WandrState:
+        """The data's state at `frames` (B,): its pose and the delta into it."""
+        before = frames - 1
+        delta = pose_delta(self.transl[before], self.orient[before], self.pose[before],
+                           self.transl[frames], self.orient[frames], self.pose[frames])  # fmt: skip
+        return WandrState(self.transl[frames], self.orient[frames], self.pose[frames], delta, self.joints[frames])
+
+    def sample_goal_frames(self, starts: torch.Tensor, steps: int, horizon: int, far_probability: float,
+                           generator: torch.Generator | None = None) -> torch.Tensor:  # fmt: skip
+        """(B,) goal frames t_G in [s + steps, s + horizon] inside each window's clip (see the module doc)."""
+        offsets = torch.arange(steps, horizon + 1)
+        candidates = starts[:, None] + offsets  # (B, H)
+        inside = candidates < self.clip_end[starts][:, None]
+        candidates = torch.where(inside, candidates, starts[:, None] + steps)
+        travel = (self.joints[candidates, PELVIS, :2] - self.joints[starts, PELVIS, :2][:, None]).norm(dim=-1)
+        far = inside & (travel >= FAR_GOAL_DISTANCE)
+        want_far = (torch.rand(len(starts), generator=generator) < far_probability)[:, None] & far.any(1, keepdim=True)
+        allowed = torch.where(want_far, far, inside)
+        weights = torch.rand(allowed.shape, generator=generator) * allowed  # argmax of random weights: uniform
+        return candidates.gather(1, weights.argmax(1, keepdim=True)).squeeze(1)
+
+
+def goal_heading(orient: torch.Tensor) -> torch.Tensor:
+    """(B, 2) ground forward of pelvis rotations (B, 3, 3)."""
+    return orient[:, :2, 1]
+
+
+def rollout_terms(model: WandrPrior, clips: WandrClips, starts: torch.Tensor, goal_frames: torch.Tensor, steps: int,
+                  body: BodyModel, free_bits: float, sample: bool = True) -> dict[str, torch.Tensor]:  # fmt: skip
+    """Mean per-frame losses of rolling windows out for `steps` frames (the first from the data).
+
+    Returns recon, joints (cm²), kl (with free bits), and joint_error_cm (steps,) per frame (no grad).
+    """
+    goal = clips.joints[goal_frames, RIGHT_WRIST]
+    arrival_heading = goal_heading(clips.orient[goal_frames])
+    state = clips.state(starts)
+    totals = {"recon": 0.0, "joints": 0.0, "kl": 0.0}
+    errors = []
+    for step in range(steps):
+        frames_left = goal_frames - (starts + step)
+        features = intention(state.joints, state.orient, goal, frames_left, arrival_heading, model.config.intentions)
+        cond = model.normalise_condition(condition(state, features))
+        nxt = starts + step + 1
+        target = pose_delta(state.transl, state.orient, state.pose, clips.transl[nxt], clips.orient[nxt], clips.pose[nxt])
+        target = model.normalise_delta(target)
+        mean, log_variance = model.encode(cond, target)
+        z = mean + torch.randn_like(mean) * torch.exp(0.5 * log_variance) if sample else mean
+        predicted = model.decode(z, cond)
+        squared = (predicted - target) ** 2
+        totals["recon"] = totals["recon"] + squared[:, :3].mean() + squared[:, 3:9].mean() + squared[:, 9:].mean()
+        kl_per_dim = 0.5 * (mean**2 + log_variance.exp() - 1 - log_variance).mean(0)
+        totals["kl"] = totals["kl"] + kl_per_dim.clamp_min(free_bits).sum()
+        delta = model.denormalise_delta(predicted)
+        state, _ = make_state(body, *integrate(state.transl, state.orient, state.pose, delta), delta)
+        offset = (state.joints - clips.joints[nxt]) * 100.0
+        totals["joints"] = totals["joints"] + (offset**2).mean()
+        errors.append(offset.detach().norm(dim=-1).mean())
+    terms = {name: value / steps for name, value in totals.items()}
+    terms["joint_error_cm"] = torch.stack(errors)
+    return terms
+
+
+@torch.no_grad()
+def fit_statistics(model: WandrPrior, clips: WandrClips, config: WandrTrainConfig, body: BodyModel,
+                   max_samples: int = 50_000) -> None:  # fmt: skip
+    """z-score statistics of the teacher-forced conditions and deltas of (up to `max_samples`) training windows."""
+    starts = clips.window_starts(1)
+    starts = starts[torch.randperm(len(starts))[:max_samples]]
+    goal_frames = clips.sample_goal_frames(starts, 1, config.goal_horizon, config.far_goal_probability)
+    state = clips.state(starts)
+    goal = clips.joints[goal_frames, RIGHT_WRIST]
+    features = intention(state.joints, state.orient, goal, goal_frames - starts, goal_heading(clips.orient[goal_frames]),
+                         model.config.intentions)  # fmt: skip
+    nxt = starts + 1
+    deltas = pose_delta(state.transl, state.orient, state.pose, clips.transl[nxt], clips.orient[nxt], clips.pose[nxt])
+    model.set_statistics(condition(state, features), deltas, config.condition_std_floor, config.delta_std_floor)
+
+
+@torch.no_grad()
+def validate(model: WandrPrior, clips: WandrClips, config: WandrTrainConfig, body: BodyModel,
+             max_windows: int = 1024) -> dict[str, float | list[float]]:  # fmt: skip
+    """Posterior-mean reconstruction of validation windows: one teacher-forced frame and a `max_rollout` rollout."""
+    model.eval()
+    generator = torch.Generator().manual_seed(0)
+    figures: dict[str, float | list[float]] = {}
+    for steps in (1, config.max_rollout):
+        starts = clips.window_starts(steps)
+        starts = starts[torch.linspace(0, len(starts) - 1, min(max_windows, len(starts))).long()]
+        goal_frames = clips.sample_goal_frames(starts, steps, config.goal_horizon, config.far_goal_probability, generator)
+        terms = rollout_terms(model, clips, starts, goal_frames, steps, body, config.free_bits, sample=False)
+        if steps == 1:
+            figures |= {"validation_recon": round(float(terms["recon"]), 5), "validation_kl": round(float(terms["kl"]), 4),
+                        "validation_joint_error_cm_1_frame": round(float(terms["joint_error_cm"][0]), 3)}  # fmt: skip
+        else:
+            figures["validation_joint_error_cm_rollout"] = [round(float(e), 2) for e in terms["joint_error_cm"]]
+    model.train()
+    return figures
+
+
+def default_weights(config: WandrConfig, subsets: tuple[str, ...] = ("cmu",)) -> Path:
+    """priors/weights/wandr.pt for the full model on CMU; ablations and data variants get suffixes."""
+    from motion_envs.priors.wandr_features import INTENTIONS
+
+    suffix = "" if tuple(config.intentions) == INTENTIONS else "_" + "_".join(config.intentions)
+    data = "" if tuple(subsets) == ("cmu",) else "_" + "_".join(subsets)
+    return WEIGHTS_DIR / f"wandr{suffix}{data}.pt"
+
+
+def train_wandr(config: WandrTrainConfig, train: WandrClips, validation: WandrClips) -> dict:
+    """Train (or resume) WANDR's prior; returns the manifest entry it writes."""
+    seed_everything(config.seed)
+    body = BodyModel()
+    model = WandrPrior(config.model)
+    fit_statistics(model, train, config, body)
+    optimiser = torch.optim.Adam(model.parameters(), lr=config.learning_rate)
+    batches_per_epoch = len(minibatches(train.window_starts(config.max_rollout, config.window_stride), config.batch_size,
+                                        torch.Generator()))  # fmt: skip
+    total_steps = batches_per_epoch * config.epochs
+    decay = config.final_learning_rate / config.learning_rate
+
+    def epoch_batches(epoch: int, generator: torch.Generator) -> list[tuple[torch.Tensor, int, int]]:
+        starts = train.window_starts(config.max_rollout, config.window_stride)
+        limit = config.rollout_limit(epoch)
+        steps = torch.randint(1, limit + 1, (batches_per_epoch,), generator=generator).tolist()
+        batches = minibatches(starts, config.batch_size, generator)
+        return [(b, epoch * batches_per_epoch + i, s) for i, (b, s) in enumerate(zip(batches, steps))]
+
+    def loss_terms(epoch: int, batch: tuple[torch.Tensor, int, int]) -> dict[str, torch.Tensor]:
+        starts, step_number, steps = batch
+        for group in optimiser.param_groups:  # linear decay, as the paper's 1e-4 -> 1e-5
+            group["lr"] = config.learning_rate * (1 + (decay - 1) * step_number / total_steps)
+        goal_frames = train.sample_goal_frames(starts, steps, config.goal_horizon, config.far_goal_probability)
+        terms = rollout_terms(model, train, starts, goal_frames, steps, body, config.free_bits)
+        beta = config.kl_beta(step_number, epoch)
+        return {"total": terms["recon"] + terms["joints"] + beta * terms["kl"], "recon": terms["recon"],
+                "joints": terms["joints"], "kl": terms["kl"]}  # fmt: skip
+
+    history = fit(model, optimiser, config.fit_settings(WANDR_KIND), epoch_batches, loss_terms,
+                  lambda epoch: f"rollout ≤ {config.rollout_limit(epoch)}")  # fmt: skip
+    entry = config.entry(WANDR_KIND, config.model, history, **validate(model, validation, config, body))
+    return ship(model, config.weights or default_weights(config.model), entry)
+
+
+def load_wandr(path: str | Path | None = None) -> WandrPrior:
+    """A trained prior from shipped weights (default: the full model, priors/weights/wandr.pt)."""
+    path = WEIGHTS_DIR / "wandr.pt" if path is None else path
+
+    def build(stored: dict) -> WandrPrior:
+        return WandrPrior(WandrConfig(**{**stored, "intentions": tuple(stored["intentions"])}))
+
+    return load_shipped(path, WANDR_KIND, build)

@@ -1,0 +1,153 @@
+"""WANDR's intention-conditioned motion prior (Diomataris et al., CVPR 2024) as a torch module.
+
+A conditional VAE over one frame's pose delta (135, see `wandr_features`):
+the encoder sees [condition (277), delta (135)] and gives q(z | ·) with
+z ∈ R^64; the decoder maps [z, condition] to the delta. Both are MLPs whose
+layers are LayerNorm → dropout → Linear → ReLU (no activation after the
+last), hidden widths the release's rule: linspace(in, out) rounded up to a
+power of two (REFERENCE_NOTES §2.3). The paper uses 15 layers each; the
+default here is `layers = 8`, which trains on 2 CPU cores within an hour
+(the manifest records its validation loss) — set `layers=15` for the
+paper's depth.
+
+Inputs and outputs are z-scored with statistics of the training data held
+as buffers, so a checkpoint carries its own normalisation. Sampling uses
+the standard μ + ε·exp(½ logvar) (the release's exp(logvar) is a quirk).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import torch
+from torch import nn
+
+from motion_envs.body import BodyModel, BodyPose
+from motion_envs.body.markers import foot_vertex_ids
+from motion_envs.priors.wandr_features import (
+    CONDITION_DIM, DELTA_DIM, INTENTIONS, WandrState, condition, integrate, intention, make_state,
+)  # fmt: skip
+
+
+@dataclass(frozen=True)
+class WandrConfig:
+    latent: int = 64
+    layers: int = 8
+    max_width: int = 512
+    dropout: float = 0.03
+    intentions: tuple[str, ...] = INTENTIONS
+    """Intention components the prior is conditioned on (the paper's ablations drop some)."""
+
+    def __post_init__(self) -> None:
+        unknown = set(self.intentions) - set(INTENTIONS)
+        if unknown or not self.intentions:
+            raise ValueError(f"intentions must be a non-empty subset of {INTENTIONS}, got {self.intentions}")
+        if self.layers < 2:
+            raise ValueError(f"layers must be at least 2, got {self.layers}")
+
+
+def release_widths(fan_in: int, fan_out: int, layers: int, max_width: int) -> list[int]:
+    """Sizes of `layers` Linear layers from fan_in to fan_out: linspace rounded up to powers of two."""
+    points = torch.linspace(fan_in, fan_out, layers + 1).tolist()
+    hidden = [min(max_width, 2 ** math.ceil(math.log2(p))) for p in points[1:-1]]
+    return [fan_in, *hidden, fan_out]
+
+
+def layer_norm_mlp(sizes: list[int], dropout: float) -> nn.Sequential:
+    """LayerNorm → dropout → Linear (→ ReLU except after the last) for each consecutive pair of sizes."""
+    blocks: list[nn.Module] = []
+    for index, (fan_in, fan_out) in enumerate(zip(sizes[:-1], sizes[1:])):
+        blocks += [nn.LayerNorm(fan_in), nn.Dropout(dropout), nn.Linear(fan_in, fan_out)]
+        if index < len(sizes) - 2:
+            blocks.append(nn.ReLU())
+    return nn.Sequential(*blocks)
+
+
+class WandrPrior(nn.Module):
+    """Encoder q(z | c, d), decoder d = f(z, c), and the statistics that z-score c and d.
+
+    c: (B, 277) condition. d: (B, 135) delta. z: (B, latent).
+    """
+
+    def __init__(self, config: WandrConfig = WandrConfig()) -> None:
+        super().__init__()
+        self.config = config
+        widths = (config.layers, config.max_width)
+        self.encoder = layer_norm_mlp(release_widths(CONDITION_DIM + DELTA_DIM, 2 * config.latent, *widths), config.dropout)
+        self.decoder = layer_norm_mlp(release_widths(config.latent + CONDITION_DIM, DELTA_DIM, *widths), config.dropout)
+        self.register_buffer("condition_mean", torch.zeros(CONDITION_DIM))
+        self.register_buffer("condition_std", torch.ones(CONDITION_DIM))
+        self.register_buffer("delta_mean", torch.zeros(DELTA_DIM))
+        self.register_buffer("delta_std", torch.ones(DELTA_DIM))
+
+    def set_statistics(self, conditions: torch.Tensor, deltas: torch.Tensor, condition_floor: float,
+                       delta_floor: float) -> None:  # fmt: skip
+        """z-score statistics from training samples: conditions (N, 277), deltas (N, 135); standard
+        deviations no smaller than the floors."""
+        for name, values, floor in (("condition", conditions, condition_floor), ("delta", deltas, delta_floor)):
+            getattr(self, f"{name}_mean").copy_(values.mean(0))
+            getattr(self, f"{name}_std").copy_(values.std(0).clamp_min(floor))
+
+    def normalise_condition(self, condition_features: torch.Tensor) -> torch.Tensor:
+        return (condition_features - self.condition_mean) / self.condition_std
+
+    def normalise_delta(self, delta: torch.Tensor) -> torch.Tensor:
+        return (delta - self.delta_mean) / self.delta_std
+
+    def denormalise_delta(self, normalised: torch.Tensor) -> torch.Tensor:
+        return normalised * self.delta_std + self.delta_mean
+
+    def encode(self, normalised_condition: torch.Tensor, normalised_delta: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """-> mean (B, latent), log-variance (B, latent)."""
+        mean, log_variance = self.encoder(torch.cat([normalised_condition, normalised_delta], 1)).chunk(2, dim=1)
+        return mean, log_variance
+
+    def decode(self, z: torch.Tensor, normalised_condition: torch.Tensor) -> torch.Tensor:
+        """-> normalised delta (B, 135)."""
+        return self.decoder(torch.cat([z, normalised_condition], 1))
+
+
+class WandrStepper:
+    """Rolls bodies forward one frame at a time with a trained prior (the inference of Sec. 3.5).
+
+    Each `step` recomputes the intention towards the goal from the current
+    pose (the closed loop), decodes the delta for latent z and integrates it.
+    With `ground_feet` (default) the body is then moved vertically so that
+    its lowest foot vertex touches the floor: our prior's integrated height
+    drifts (see `wandr_features`), and a walking-and-reaching body always
+    has a foot down. The paper's generation has no such step; set it off
+    to see the prior alone. `intentions` overrides which intention parts the
+    prior is shown (default: those it was trained with; () shows none).
+    """
+
+    def __init__(self, prior: WandrPrior, body: BodyModel | None = None, ground_feet: bool = True,
+                 intentions: tuple[str, ...] | None = None) -> None:  # fmt: skip
+        self.prior = prior
+        self.body = body or BodyModel()
+        self.ground_feet = ground_feet
+        self.intentions = prior.config.intentions if intentions is None else tuple(intentions)
+        self.foot_rows = self.body.skin_rows(foot_vertex_ids().to(self.body.offsets.device))
+
+    def feet(self, posed: BodyPose) -> torch.Tensor:
+        """(B, V, 3) foot vertices of posed bodies."""
+        return self.body.skin_with_rows(posed, self.foot_rows)
+
+    def condition(self, state: WandrState, goal: torch.Tensor, frames_left: torch.Tensor) -> torch.Tensor:
+        """(B, 277) the normalised condition of bodies towards goals (B, 3) due in `frames_left` (B,) frames."""
+        features = intention(state.joints, state.orient, goal, frames_left, components=self.intentions)
+        return self.prior.normalise_condition(condition(state, features))
+
+    def step(self, state: WandrState, z: torch.Tensor, goal: torch.Tensor,
+             frames_left: torch.Tensor) -> tuple[WandrState, torch.Tensor]:  # fmt: skip
+        """The next frame of bodies `state` (batch B) decoded with latents z (B, latent), and its foot vertices (B, V, 3)."""
+        delta = self.prior.denormalise_delta(self.prior.decode(z, self.condition(state, goal, frames_left)))
+        transl, orient, pose = integrate(state.transl, state.orient, state.pose, delta)
+        following, posed = make_state(self.body, transl, orient, pose, delta)
+        feet = self.feet(posed)
+        if not self.ground_feet:
+            return following, feet
+        lift = torch.zeros_like(transl)
+        lift[:, 2] = -feet[..., 2].amin(dim=-1)
+        grounded = following._replace(transl=transl + lift, joints=following.joints + lift[:, None])
+        return grounded, feet + lift[:, None]

@@ -1,0 +1,200 @@
+"""WANDR: motion representation, intention features, training, WandrReach-v0 and the sampler."""
+
+from __future__ import annotations
+
+import math
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import roma
+import torch
+from gymnasium.utils.env_checker import check_env
+
+import motion_envs  # noqa: F401  (registers the ids)
+from baselines.latent_optimisation import LatentOptimisationSettings, LatentSequence, optimise_latents
+from baselines.wandr_sampler import WandrSampler, roll_out
+from motion_envs.envs.wandr_reach import OBSERVATION_SIZE, WandrReachConfig, WandrReachCore
+from motion_envs.priors.checkpoint import CheckpointMismatchError
+from motion_envs.priors.train_wandr import WandrClips, WandrTrainConfig, load_wandr, train_wandr
+from motion_envs.priors.training import WEIGHTS_DIR
+from motion_envs.priors.wandr import WandrConfig, WandrPrior
+from motion_envs.priors.wandr_features import PELVIS, RIGHT_WRIST, heading, integrate, intention, pose_delta
+
+ENV_ID = "motion_envs/WandrReach-v0"
+
+
+@pytest.fixture(scope="module")
+def shipped() -> WandrPrior:
+    return load_wandr()
+
+
+def _turn(angle: float) -> torch.Tensor:
+    return roma.rotvec_to_rotmat(torch.tensor([[0.0, 0.0, angle]]))
+
+
+def test_heading_and_intention_match_hand_computed_values():
+    orient = _turn(math.pi / 2)  # facing -x
+    assert torch.allclose(heading(orient)[0, :2, 1], torch.tensor([-1.0, 0.0]), atol=1e-6)
+    joints = torch.zeros(1, 22, 3)
+    joints[0, PELVIS] = torch.tensor([1.0, 1.0, 0.9])
+    joints[0, RIGHT_WRIST] = torch.tensor([1.0, 0.8, 1.0])
+    goal = torch.tensor([[-2.0, 1.0, 1.5]])  # 3 m ahead of the pelvis, 0.5 m up
+    features = intention(joints, orient, goal, torch.tensor([60]))
+    # wrist: R_zᵀ (G − W) / (60 / 30 s) with R_zᵀ taking world -x to local +y and world +y to local +x
+    assert torch.allclose(features[0, :3], torch.tensor([0.2, 3.0, 0.5]) / 2.0, atol=1e-4)
+    assert torch.allclose(features[0, 3:6], torch.tensor([0.0, 2 * (1 - math.exp(-3.0)), 0.0]), atol=1e-5)
+    assert torch.allclose(features[0, 6:9], torch.zeros(3), atol=1e-6)  # already facing the goal
+    behind = intention(joints, orient, torch.tensor([[4.0, 1.0, 1.0]]), torch.tensor([60]))
+    assert torch.allclose(behind[0, 6:9], torch.tensor([0.0, -2.0, 0.0]), atol=1e-5)  # turn around: (0,-1) − (0,1)
+    assert torch.equal(intention(joints, orient, goal, torch.tensor([0])), torch.zeros(1, 9))  # at t_G
+    only_wrist = intention(joints, orient, goal, torch.tensor([60]), components=("wrist",))
+    assert torch.equal(only_wrist[0, 3:], torch.zeros(6)) and torch.equal(only_wrist[0, :3], features[0, :3])
+    with pytest.raises(ValueError, match="unknown intention"):
+        intention(joints, orient, goal, torch.tensor([60]), components=("elbow",))
+
+
+def test_pose_delta_integrates_back_and_ignores_heading():
+    generator = torch.Generator().manual_seed(0)
+    transl = torch.randn(4, 2, 3, generator=generator)
+    orient = roma.rotvec_to_rotmat(0.5 * torch.randn(4, 2, 3, generator=generator))
+    pose = roma.rotvec_to_rotmat(0.3 * torch.randn(4, 2, 21, 3, generator=generator))
+    delta = pose_delta(transl[:, 0], orient[:, 0], pose[:, 0], transl[:, 1], orient[:, 1], pose[:, 1])
+    rebuilt = integrate(transl[:, 0], orient[:, 0], pose[:, 0], delta)
+    for mine, truth in zip(rebuilt, (transl[:, 1], orient[:, 1], pose[:, 1])):
+        assert torch.allclose(mine, truth, atol=1e-5)
+    turn = _turn(1.1)
+    turned = pose_delta(transl[:, 0] @ turn[0].T, turn @ orient[:, 0], pose[:, 0],
+                        transl[:, 1] @ turn[0].T, turn @ orient[:, 1], pose[:, 1])  # fmt: skip
+    assert torch.allclose(turned, delta, atol=1e-5)
+
+
+def test_a_tiny_training_run_lowers_its_loss(walking_motion_30fps, body, tmp_path):
+    clips = WandrClips.from_motions([walking_motion_30fps], body)
+    config = WandrTrainConfig(model=WandrConfig(layers=3, max_width=64), epochs=5, batch_size=16, max_rollout=1,
+                              run_dir=tmp_path / "run", weights=tmp_path / "w" / "wandr.pt")  # fmt: skip
+    entry = train_wandr(config, clips, clips)
+    losses = entry["train_loss_by_epoch"]
+    assert losses[-1] < losses[0]
+    assert entry["validation_joint_error_cm_1_frame"] < 10.0
+    prior = load_wandr(config.weights)
+    assert prior.config.layers == 3 and torch.isfinite(prior.delta_std).all()
+
+
+def test_goal_frames_lie_ahead_inside_the_clip(walking_motion_30fps, body):
+    clips = WandrClips.from_motions([walking_motion_30fps, walking_motion_30fps], body)
+    starts = clips.window_starts(5)
+    assert (starts >= 1).all() and (starts + 5 < clips.clip_end[starts]).all()
+    assert not torch.isin(torch.tensor([0, len(walking_motion_30fps.transl)]), starts).any()  # no previous frame
+    goals = clips.sample_goal_frames(starts, 5, 240, 0.5, torch.Generator().manual_seed(0))
+    assert (goals >= starts + 5).all() and (goals < clips.clip_end[starts]).all() and (goals <= starts + 240).all()
+
+
+def test_loading_another_models_checkpoint_fails_clearly():
+    with pytest.raises(CheckpointMismatchError, match="expected 'wandr'"):
+        load_wandr(WEIGHTS_DIR / "gamma_predictor_2f.pt")
+
+
+def test_env_spaces_check_env_and_bad_input(shipped):
+    env = gym.make(ENV_ID, prior=shipped)
+    assert env.observation_space.shape == (OBSERVATION_SIZE,) and env.action_space.shape == (64,)
+    check_env(env.unwrapped, skip_render_check=True)
+    observation, info = env.reset(seed=3)
+    assert observation.shape == (OBSERVATION_SIZE,) and np.isfinite(observation).all()
+    with pytest.raises(ValueError, match="shape"):
+        env.step(np.zeros(63, dtype=np.float32))
+    with pytest.raises(ValueError, match="NaN"):
+        env.step(np.full(64, np.nan, dtype=np.float32))
+    with pytest.raises(ValueError, match="unknown reset options"):
+        env.reset(options={"target": (0, 0, 1)})
+    with pytest.raises(TypeError, match="unknown arguments"):
+        gym.make(ENV_ID, prior=shipped, goal_radius=0.2)
+    _, reward, _, _, info = env.step(np.zeros(64, dtype=np.float32))
+    assert set(info["reward_terms"]) == {"progress", "success", "skating", "latent"} and np.isfinite(reward)
+
+
+def test_vector_env_matches_single_envs(shipped):
+    vector = gym.make_vec(ENV_ID, num_envs=3, vectorization_mode="vector_entry_point", prior=shipped)
+    singles = [gym.make(ENV_ID, prior=shipped) for _ in range(3)]
+    observations, _ = vector.reset(seed=10)
+    actions = np.random.default_rng(0).normal(size=(4, 3, 64)).astype(np.float32)
+    for i, env in enumerate(singles):
+        single, _ = env.reset(seed=10 + i)
+        np.testing.assert_allclose(observations[i], single, rtol=1e-5, atol=1e-5)
+    for step in range(4):
+        observations, rewards, *_ = vector.step(actions[step])
+        for i, env in enumerate(singles):
+            single, reward, *_ = env.step(actions[step, i])
+            np.testing.assert_allclose(observations[i], single, rtol=1e-4, atol=1e-4)
+            assert rewards[i] == pytest.approx(reward, rel=1e-4, abs=1e-4)
+
+
+def test_reset_options_steer_the_goal(shipped):
+    core = WandrReachCore(WandrReachConfig(max_frames=20), shipped)
+    rng = [np.random.default_rng(0)]
+    start = {"start_index": 0, "facing": 0.0}
+    moving = core.sample_initial_state(rng, {"goal": (0.0, 3.0, 1.0), "goal_velocity": (0.0, 0.3, 0.0)})
+    moved, _ = core.step(moving, torch.zeros(1, 64))
+    assert torch.allclose(moved.goal - moving.goal, torch.tensor([[0.0, 0.01, 0.0]]), atol=1e-6)
+    hurried = core.sample_initial_state(rng, {"goal": (0.0, 3.0, 1.0), "goal_time": 15})
+    relaxed = core.sample_initial_state(rng, {"goal": (0.0, 3.0, 1.0), **start})
+    wrist_speed = [core.observe(s)[0, 268:271].norm() for s in (hurried, relaxed)]  # z-scored, so compare order
+    assert hurried.frames_left.item() == 15 and relaxed.frames_left.item() == 20
+    assert wrist_speed[0] != wrist_speed[1]
+    wrist = relaxed.joints[0, RIGHT_WRIST]
+    chain = core.sample_initial_state(rng, {"goals": [wrist.tolist(), (0.0, 3.0, 1.0)], **start})  # first: at the wrist
+    stepped, _ = core.step(chain, torch.zeros(1, 64))
+    assert stepped.goal_index.item() == 1 and not stepped.reached.item()
+    with pytest.raises(ValueError, match="either 'goal' or 'goals'"):
+        core.sample_initial_state(rng, {"goal": (0, 0, 1), "goals": [(0, 0, 1)]})
+
+
+def test_sampler_reaches_a_goal_just_in_front_of_the_wrist(shipped):
+    core = WandrReachCore(WandrReachConfig(max_frames=30), shipped)  # due in 1 s
+    count = 16
+    rows = torch.arange(count) % core.num_starts
+    state = core.initial_state(rows, torch.zeros(count), torch.zeros(count, 1, 3))
+    goal = state.joints[:, RIGHT_WRIST] + 0.3 * heading(state.orient)[:, :, 1]
+    final = roll_out(core, core.initial_state(rows, torch.zeros(count), goal[:, None]), WandrSampler(seed=0))
+    assert final.reached.float().mean() >= 0.25  # the shipped prior: 6 of 16 (its mean z: 12 of 16)
+    assert (final.closest < 0.25).all()  # every wrist came closer than the 0.3 m it started at
+
+
+def test_latent_optimisation_brings_the_wrist_closer():
+    torch.manual_seed(0)
+    prior = WandrPrior(WandrConfig(layers=2, max_width=32)).eval()  # untrained: the gradient path is what is tested
+    core = WandrReachCore(WandrReachConfig(max_frames=6), prior)
+    state = core.initial_state(torch.tensor([0, 1]), torch.zeros(2), torch.zeros(2, 1, 3))
+    goal = state.joints[:, RIGHT_WRIST] + torch.tensor([0.0, 0.4, 0.1])
+    state = core.initial_state(torch.tensor([0, 1]), torch.zeros(2), goal[:, None])
+    initial = torch.zeros(2, 6, 64)
+    settings = LatentOptimisationSettings(steps=15, learning_rate=0.3)
+    latents = optimise_latents(core.stepper, state, 6, initial, settings)
+    before = roll_out(core, state, LatentSequence(initial))
+    after = roll_out(core, state, LatentSequence(latents))
+    assert (after.distance < before.distance - 0.01).all()
+    with pytest.raises(ValueError, match="initial latents"):
+        optimise_latents(core.stepper, state, 5, initial, settings)
+
+
+def test_play_renders_wandr_frames_and_summarises(tmp_path, shipped):
+    import imageio.v3 as iio
+
+    from motion_envs.play import play
+
+    video = tmp_path / "reach.mp4"
+    (summary,) = play(ENV_ID, video=video, every=2, max_frames=6, goal_distance=(3.0, 4.0))
+    assert summary["frames"] == 6 and summary["success"] is False and 0.0 <= summary["foot_skating"] <= 1.0
+    frames = iio.imread(video)
+    assert frames.shape == (3, 360, 480, 3)  # frames 1, 3, 5
+    assert frames.std() > 5  # not a blank image
+    with pytest.raises(ValueError, match="unknown baseline"):
+        play(ENV_ID, baseline="random")
+
+
+def test_kl_weight_warms_up_then_rises_at_the_chosen_epoch():
+    config = WandrTrainConfig(kl_weight=0.01, kl_warmup_steps=100, late_kl_weight=0.1, kl_raise_epoch=5)
+    assert config.kl_beta(0, 0) == 0.0 and 0.0 < config.kl_beta(50, 0) < 0.01
+    assert config.kl_beta(10_000, 4) == 0.01 and config.kl_beta(10_000, 5) == 0.1
+    assert WandrTrainConfig().kl_beta(10_000, 39) == 0.01  # the paper's β throughout by default
+    assert [config.rollout_limit(epoch) for epoch in (0, 10, 20, 39)] == [1, 5, 10, 10]

@@ -31,21 +31,22 @@ def main() -> int:
     figure, (by_steps, by_time) = plt.subplots(1, 2, figsize=(10, 4))
     lines = ["# PPO learning curves (shipped policies)", "",
              "Per-body success of training episodes (sampled latents), recorded every 3 minutes; the shipped "
-             "checkpoint is the best window. One thread per run, runs side by side on 2 cores.", "",
-             "| policy | command | start (cloned) | best window | at steps | at minutes | env steps in all |",
+             "checkpoint is the best window. GammaReach policies start from the data's cloned latents, the WandrReach "
+             "policy from WANDR's sampler (mean 0, σ = 1). One thread per run.", "",
+             "| policy | command | first window | best window | at steps | at minutes | env steps in all |",
              "|---|---|---|---|---|---|---|"]  # fmt: skip
     for name, entry in runs.items():
         curve = entry["curve"]
         steps = [point["timesteps"] for point in curve]
         rates = [point["success_rate"] for point in curve]
         minutes = [point["wall_seconds"] / 60 for point in curve]
-        label = Path(name).stem.removeprefix("ppo_gammareach_")
+        label = Path(name).stem.removeprefix("ppo_")
         by_steps.plot(steps, rates, label=label)
         by_time.plot(minutes, rates, label=label)
         best = max(curve, key=lambda point: point["success_rate"])
         lines.append(f"| {label} | `{entry['config']['command']}` | {rates[0]:.2f} | {best['success_rate']:.2f} | "
                      f"{best['timesteps']:,} | {best['wall_seconds'] / 60:.0f} | {entry['timesteps']:,} |")  # fmt: skip
-    by_steps.set(xlabel="env steps (primitives)", ylabel="success rate (per body)", ylim=(0, 1))
+    by_steps.set(xlabel="env steps (GammaReach: primitives; WandrReach: frames)", ylabel="success rate (per body)", ylim=(0, 1))
     by_time.set(xlabel="wall time (min)", ylim=(0, 1))
     by_steps.legend()
     figure.tight_layout()

@@ -2,8 +2,8 @@
 
 GammaReach-v0: one episode of the shipped α = 1 PPO policy (seed 3), four
 frames of its ray-cast video side by side -> `docs/gamma_reach.png`.
-WandrReach-v0: WANDR's sampler reaching a goal 1.5 m ahead at chest height
-(seed 0) -> `docs/wandr_reach.png`.
+WandrReach-v0: the shipped PPO policy reaching a goal 2 m ahead and to the
+left at chest height (seed 0) -> `docs/wandr_reach.png`.
 """
 
 from __future__ import annotations
@@ -20,6 +20,7 @@ from motion_envs.priors.training import WEIGHTS_DIR
 
 DOCS = Path(__file__).resolve().parent.parent / "docs"
 POLICY = WEIGHTS_DIR / "ppo_gammareach_alpha1_paper.zip"
+WANDR_POLICY = WEIGHTS_DIR / "ppo_wandrreach_alpha1_default.zip"
 
 
 def episode_strip(env_id: str, destination: Path, seed: int, **play_kwargs) -> Path:
@@ -39,8 +40,8 @@ def gamma_reach_strip(destination: Path = DOCS / "gamma_reach.png", seed: int = 
 
 
 def wandr_reach_strip(destination: Path = DOCS / "wandr_reach.png", seed: int = 0) -> Path:
-    return episode_strip("motion_envs/WandrReach-v0", destination, seed, goal_angle=(0.0, 0.0),
-                         goal_height=(1.2, 1.2), goal_distance=(1.5, 1.5))  # fmt: skip
+    return episode_strip("motion_envs/WandrReach-v0", destination, seed, policy=WANDR_POLICY, goal_angle=(0.6, 0.6),
+                         goal_height=(1.2, 1.2), goal_distance=(2.0, 2.0))  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -328,15 +328,16 @@ class WandrReachCore:
             terms["skating"] += skated.float()
             distance_now = (body.joints[:, RIGHT_WRIST] - goals[rows, goal_index]).norm(dim=-1)
             lowest_id = feet[..., 2].argmin(dim=-1)
-            keep = ~active[:, None]  # bodies already done stay frozen
-            state = WandrReachState(
-                *(torch.where(keep.reshape(-1, *([1] * (new.ndim - 1))), old, new) for old, new in zip(state.body, body)),
-                goals, goal_index, state.goal_count, state.goal_velocity, state.goal_time,
-                torch.where(advance, self._deadline(frame, state.goal_time), state.deadline), torch.where(active, frame, state.frame),
-                torch.where(active, distance_now, state.distance),
-                torch.where(active & ~advance, torch.minimum(state.closest, distance_now), torch.where(advance, distance_now, state.closest)),
-                torch.where(active, lowest_id, state.lowest_id), torch.where(keep, state.lowest_xy, feet[rows, lowest_id, :2]),
-                state.skated + skated.long(), state.reached | (arrived & last),
+            moved = WandrState(*(_where(active, new, old) for new, old in zip(body, state.body)))  # done bodies stay
+            state = dataclasses.replace(
+                state, **moved._asdict(), goals=goals, goal_index=goal_index,
+                deadline=torch.where(advance, self._deadline(frame, state.goal_time), state.deadline),
+                frame=_where(active, frame, state.frame),
+                distance=_where(active, distance_now, state.distance),
+                closest=torch.where(advance, distance_now, _where(active, torch.minimum(state.closest, distance_now), state.closest)),
+                lowest_id=_where(active, lowest_id, state.lowest_id),
+                lowest_xy=_where(active, feet[rows, lowest_id, :2], state.lowest_xy),
+                skated=state.skated + skated.long(), reached=state.reached | (arrived & last),
             )  # fmt: skip
         terms["latent"] = latent_cost(z)
         reward = (scales.progress * terms["progress"] + scales.success * terms["success"]
@@ -344,6 +345,11 @@ class WandrReachCore:
         terminated = state.reached if config.terminate_on_success else torch.zeros_like(state.reached)
         truncated = (state.frame >= config.max_frames) & ~terminated
         return state, WandrStepResult(reward, terms, terminated, truncated)
+
+
+def _where(mask: torch.Tensor, new: torch.Tensor, old: torch.Tensor) -> torch.Tensor:
+    """`new` for the bodies where `mask` (N,) holds, else `old` (both (N, ...))."""
+    return torch.where(mask.reshape(-1, *([1] * (new.ndim - 1))), new, old)
 
 
 def _step_info(state: WandrReachState, result: WandrStepResult, index: int) -> dict[str, Any]:

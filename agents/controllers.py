@@ -1,7 +1,9 @@
 """Trained policies as batched controllers: `controller(core, state) -> z (N, latent)`.
 
-The same call shape as `baselines.latent_controllers`, so benchmarks and the
-tree search run learned and non-learned controllers alike.
+The same call shape as `baselines.latent_controllers` and
+`baselines.wandr_sampler`, so benchmarks and the tree search run learned and
+non-learned controllers alike, on any env core with `observe(state)`
+(GammaReach, WandrReach).
 """
 
 from __future__ import annotations
@@ -11,7 +13,8 @@ from pathlib import Path
 import torch
 
 from agents.ppo_kl import PPOKL
-from motion_envs.envs.gamma_reach import GammaReachCore, GammaReachState
+from motion_envs.batched import BatchedState
+from motion_envs.envs.core import BatchedCore
 
 
 class PolicyLatent:
@@ -23,7 +26,7 @@ class PolicyLatent:
         self.generator = torch.Generator().manual_seed(seed)
 
     @torch.no_grad()
-    def __call__(self, core: GammaReachCore, state: GammaReachState) -> torch.Tensor:
+    def __call__(self, core: BatchedCore, state: BatchedState) -> torch.Tensor:
         observations = core.observe(state).to(self.model.device)
         distribution = self.model.policy.get_distribution(observations).distribution
         if self.deterministic:

@@ -227,7 +227,7 @@ class WandrReachCore:
         if (start_index < 0).any() or (start_index >= self.num_starts).any():
             raise ValueError(f"start_index must lie in [0, {self.num_starts}), got {start_index.tolist()}")
         count = len(start_index)
-        turn = roma.rotvec_to_rotmat(torch.stack([torch.zeros_like(facing), torch.zeros_like(facing), facing], -1))
+        turn = _about_z(facing)
         origin = self.start_transl[start_index, -1] * torch.tensor([1.0, 1.0, 0.0], device=self.device)
         transl = ((self.start_transl[start_index] - origin[:, None])[..., None, :] @ turn[:, None].transpose(-1, -2)).squeeze(-2)
         orient = turn[:, None] @ roma.rotvec_to_rotmat(self.start_orient[start_index])
@@ -256,12 +256,12 @@ class WandrReachCore:
     def cylinder_goals(self, start_index: torch.Tensor, facing: torch.Tensor, angle: torch.Tensor, height: torch.Tensor,
                        distance: torch.Tensor) -> torch.Tensor:  # fmt: skip
         """(N, 3) goals at `angle` from the body's forward (N,), `height` (N,), ground `distance` (N,) from
-        the pelvis, for bodies placed by `initial_state(start_index, facing, ...)`."""
-        probe = self.initial_state(start_index, facing, torch.zeros(len(start_index), 1, 3))
-        forward = heading(probe.orient)[:, :2, 1]
+        the pelvis, for bodies placed by `initial_state(start_index, facing, ...)` (pelvis over the origin)."""
+        start_index, facing = start_index.to(self.device), facing.to(self.device)
+        forward = heading(_about_z(facing) @ roma.rotvec_to_rotmat(self.start_orient[start_index, -1]))[:, :2, 1]
         cosine, sine = torch.cos(angle.to(self.device)), torch.sin(angle.to(self.device))
         direction = torch.stack([cosine * forward[:, 0] - sine * forward[:, 1], sine * forward[:, 0] + cosine * forward[:, 1]], -1)
-        ground = probe.transl[:, :2] + direction * distance.to(self.device)[:, None]
+        ground = direction * distance.to(self.device)[:, None]
         return torch.cat([ground, height.to(self.device)[:, None]], dim=1)
 
     def sample_initial_state(self, rngs: list[np.random.Generator], options: dict[str, Any] | None = None) -> WandrReachState:
@@ -345,6 +345,11 @@ class WandrReachCore:
         terminated = state.reached if config.terminate_on_success else torch.zeros_like(state.reached)
         truncated = (state.frame >= config.max_frames) & ~terminated
         return state, WandrStepResult(reward, terms, terminated, truncated)
+
+
+def _about_z(angle: torch.Tensor) -> torch.Tensor:
+    """(N,) radians -> (N, 3, 3) rotations about +z."""
+    return roma.rotvec_to_rotmat(torch.stack([torch.zeros_like(angle), torch.zeros_like(angle), angle], -1))
 
 
 def _where(mask: torch.Tensor, new: torch.Tensor, old: torch.Tensor) -> torch.Tensor:

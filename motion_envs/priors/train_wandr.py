@@ -48,7 +48,7 @@ from motion_envs.data.motion import BodyMotion
 from motion_envs.priors.training import WEIGHTS_DIR, TrainRun, fit, load_shipped, minibatches, seed_everything, ship
 from motion_envs.priors.wandr import WandrConfig, WandrPrior
 from motion_envs.priors.wandr_features import (
-    FPS, PELVIS, RIGHT_WRIST, WandrState, condition, integrate, intention, make_state, pose_delta,
+    FPS, INTENTIONS, PELVIS, RIGHT_WRIST, WandrState, condition, integrate, intention, make_state, pose_delta,
 )  # fmt: skip
 
 WANDR_KIND = "wandr"
@@ -230,8 +230,6 @@ def validate(model: WandrPrior, clips: WandrClips, config: WandrTrainConfig, bod
 
 def default_weights(config: WandrConfig, subsets: tuple[str, ...] = ("cmu",)) -> Path:
     """priors/weights/wandr.pt for the full model on CMU; ablations and data variants get suffixes."""
-    from motion_envs.priors.wandr_features import INTENTIONS
-
     suffix = "" if tuple(config.intentions) == INTENTIONS else "_" + "_".join(config.intentions)
     data = "" if tuple(subsets) == ("cmu",) else "_" + "_".join(subsets)
     return WEIGHTS_DIR / f"wandr{suffix}{data}.pt"

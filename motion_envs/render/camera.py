@@ -36,7 +36,7 @@ class Camera:
     def ray_directions(self) -> np.ndarray:
         """Unit directions (H, W, 3) float32 of the rays through pixel centres (read-only: cached by orientation)."""
         forward, right, _ = self.axes()
-        return _ray_directions(self.width, self.height, self.fov, tuple(np.round(forward, 9)), tuple(np.round(right, 9)))
+        return pinhole_rays(self.width, self.height, self.fov, tuple(np.round(forward, 9)), tuple(np.round(right, 9)))
 
     def project(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """World points (P, 3) -> pixel (row, column) floats (P, 2) and a mask of points in front of the camera."""
@@ -50,7 +50,8 @@ class Camera:
 
 
 @lru_cache(maxsize=8)
-def _ray_directions(width: int, height: int, fov: float, forward: tuple, right: tuple) -> np.ndarray:
+def pinhole_rays(width: int, height: int, fov: float, forward: tuple, right: tuple) -> np.ndarray:
+    """Unit ray directions (H, W, 3) float32 of a camera with unit `forward` and `right` (3-tuples); read-only."""
     forward, right = np.asarray(forward), np.asarray(right)
     up = np.cross(right, forward)
     rows, columns = np.meshgrid(np.arange(height), np.arange(width), indexing="ij")

@@ -1,10 +1,14 @@
-"""Third-person images by ray casting (embree through embreex): bodies, ground grid, goal, trail.
+"""Third-person images by ray casting (embree through embreex): bodies, scene, ground grid, goal, trail.
 
 Each frame: the posed bodies' mesh (a lower level of detail of the
 mannequin-x wooden mesh) goes into an embree scene and only the rays of the
-pixels its projection covers are cast; the ground (z = 0), its 1 m grid, the
-goal ring and the soft contact shadows are analytic per pixel; the pelvis
-trail is drawn on top. No OpenGL, no display.
+pixels its projection covers are cast; a static scene (walls and furniture,
+cut away above `cutaway_height` so that the body stays in sight) is cast
+for the pixels whose rays enter its bounding box; the ground (z = 0), its
+1 m grid, the goal ring and the soft contact shadows are analytic per pixel,
+a goal sphere is intersected analytically; a per-pixel depth buffer decides
+what is in front. The pelvis trail is drawn last, where it is not hidden.
+No OpenGL, no display.
 """
 
 from __future__ import annotations
@@ -14,12 +18,14 @@ from functools import lru_cache
 
 import numpy as np
 import torch
-from embreex import rtcore_scene
-from embreex.mesh_construction import TriangleMesh
+import trimesh
 
 from motion_envs.body import BodyModel
 from motion_envs.body.skeleton import rest_body
-from motion_envs.render.camera import Camera
+from motion_envs.render.camera import Camera, pinhole_rays
+from motion_envs.render.raycast import RayCaster
+from motion_envs.scenes.labels import PALETTE
+from motion_envs.scenes.scene import FLOOR, Scene
 
 SKY_TOP, SKY_BOTTOM = np.array([0.55, 0.68, 0.85]), np.array([0.88, 0.91, 0.95])
 GROUND, GRID = np.array([0.82, 0.82, 0.80]), np.array([0.62, 0.62, 0.60])
@@ -40,9 +46,10 @@ class BodyMesh:
 
 
 @lru_cache(maxsize=4)
-def body_mesh(cell: float = 0.015) -> BodyMesh:
+def body_mesh(cell: float = 0.025) -> BodyMesh:
     """Vertex clustering at `cell` metres: every rest vertex snaps to one kept vertex of its grid cell,
-    collapsed triangles go. 0.015 m keeps 9.6k of 24k vertices and 22k of 48k faces."""
+    collapsed triangles go. 0.025 m keeps 4.0k of 24k vertices and 9.8k of 48k faces (0.015 m: 22k faces);
+    embree's build of the posed mesh, every frame, costs time in proportion to the faces."""
     rest = rest_body()
     cells = np.floor(rest.vertices / cell).astype(np.int64)
     _, kept, cell_of_vertex = np.unique(cells, axis=0, return_index=True, return_inverse=True)
@@ -53,13 +60,15 @@ def body_mesh(cell: float = 0.015) -> BodyMesh:
 
 
 class ThirdPersonRenderer:
-    """Renders posed bodies with their goal and trail as (H, W, 3) uint8 images."""
+    """Renders posed bodies with their goal and trail, optionally in a scene, as (H, W, 3) uint8 images."""
 
-    def __init__(self, body: BodyModel | None = None, width: int = 480, height: int = 360, lod_cell: float = 0.015) -> None:
+    def __init__(self, body: BodyModel | None = None, width: int = 480, height: int = 360, lod_cell: float = 0.025,
+                 scene: Scene | None = None, cutaway_height: float = 1.2) -> None:  # fmt: skip
         self.body = body or BodyModel()
         self.width, self.height = width, height
         self.mesh = body_mesh(lod_cell)
         self.rows = self.body.skin_rows(self.mesh.vertex_ids)
+        self.scene = None if scene is None else _CutawayScene(scene, cutaway_height)
 
     @torch.no_grad()
     def vertices(self, transl: torch.Tensor, global_orient: torch.Tensor, body_pose: torch.Tensor) -> np.ndarray:
@@ -68,108 +77,240 @@ class ThirdPersonRenderer:
         return self.body.skin_with_rows(posed, self.rows).numpy()
 
     def render(self, vertices: np.ndarray, camera: Camera, goal: np.ndarray | None = None, goal_radius: float = 0.75,
-               trail: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
-        """One image. vertices: (B, V, 3) posed bodies from `vertices`; goal: (3,) on the ground; trail: (T, 3)."""
-        height, width = camera.height, camera.width
+               trail: np.ndarray | None = None, goal_shape: str = "ring") -> np.ndarray:  # fmt: skip
+        """One image. vertices: (B, V, 3) posed bodies from `vertices`; goal: (3,); trail: (T, 3).
+
+        goal_shape "ring": a ring of `goal_radius` on the ground under the goal; "sphere": a floating sphere of
+        `goal_radius` at the goal, with a ring of the same radius on the ground below it as a height cue."""
+        if goal_shape not in ("ring", "sphere"):
+            raise ValueError(f"goal_shape must be 'ring' or 'sphere', got {goal_shape!r}")
         directions = camera.ray_directions()  # (H, W, 3) float32, cached per camera orientation
-        image = self._background(directions, camera, vertices, goal, goal_radius)
-        hit = self._cast_bodies(vertices, camera, directions)
-        if hit is not None:
-            rows, columns, normals = hit
-            shade = 0.35 + 0.65 * np.clip(normals @ LIGHT, 0.0, None)
-            image[rows, columns] = WOOD * shade[:, None]
+        image, depth = self._background(directions, camera, vertices, goal, goal_radius)
+        if self.scene is not None:
+            self.scene.draw(image, depth, camera, directions)
+        self._draw_bodies(image, depth, vertices, camera, directions)
+        if goal is not None and goal_shape == "sphere":
+            _draw_sphere(image, depth, camera, directions, np.asarray(goal, dtype=np.float64), goal_radius)
         if trail is not None and len(trail) > 1:
-            self._draw_trail(image, camera, trail, occupied=None if hit is None else (hit[0], hit[1]))
-        return (np.clip(image, 0.0, 1.0) * 255).astype(np.uint8).reshape(height, width, 3)
+            _draw_trail(image, depth, camera, trail)
+        return (np.clip(image, 0.0, 1.0) * 255).astype(np.uint8)
 
     def _background(self, directions: np.ndarray, camera: Camera, vertices: np.ndarray, goal: np.ndarray | None,
-                    goal_radius: float) -> np.ndarray:  # fmt: skip
-        """Sky gradient and the analytic ground: grid, goal ring, contact shadows. (H, W, 3) float32.
-
-        The camera has no roll, so the ground is the rows below the horizon: only those are shaded."""
-        up = directions[:, 0, 2]
-        image = np.empty(directions.shape, dtype=np.float32)
-        image[:] = (SKY_BOTTOM + (SKY_TOP - SKY_BOTTOM) * np.clip(up, 0.0, 1.0)[:, None])[:, None, :]
-        first = int(np.searchsorted(-up, 1e-4))  # rows are ordered top (up > 0) to bottom (up < 0)
-        rays = directions[first:]
-        if len(rays) == 0:
-            return image
-        distance = np.float32(-camera.eye[2]) / rays[..., 2]
-        points = camera.eye[:2].astype(np.float32) + distance[..., None] * rays[..., :2]  # ground hits (x, y)
-        fraction = np.abs(points - np.round(points))
-        line = (fraction < np.clip(0.004 * distance, 0.01, 0.06)[..., None]).any(-1)
-        fade = np.exp(-distance / 25.0)  # far ground fades into the horizon
-        shade = (np.where(line, GRID[0], GROUND[0]) * fade + SKY_BOTTOM[0] * (1.0 - fade))[..., None]
-        ground = (shade * (GROUND / GROUND[0])).astype(np.float32)
+                    goal_radius: float) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+        """Sky gradient and the analytic ground: grid, goal ring, contact shadows. Image (H, W, 3) float32 and
+        depth (H, W) float32 (distance along each ray; inf for sky)."""
+        forward, right, _ = camera.axes()
+        view = _ground_view(camera.width, camera.height, camera.fov, tuple(np.round(forward, 9)),
+                            tuple(np.round(right, 9)), round(float(camera.eye[2]), 6))  # fmt: skip
+        image, depth = view.sky.copy(), view.depth.copy()
+        if view.first == camera.height:
+            return image, depth
+        points = view.offsets + camera.eye[:2].astype(np.float32)  # (R, W, 2) ground hits
+        line = (np.abs(points - np.round(points)) < view.line_width[..., None]).any(-1)
+        ground = np.where(line[..., None], view.line_colour, view.plain_colour)
         if goal is not None:
-            to_goal = np.hypot(points[..., 0] - goal[0], points[..., 1] - goal[1])
-            inside = to_goal < goal_radius
-            ground[inside] = 0.6 * ground[inside] + 0.4 * GOAL
-            ground[inside & (to_goal > goal_radius - 0.08)] = GOAL
-        self._shade_shadows(ground, points, vertices)
-        image[first:] = ground
-        return image
-
-    @staticmethod
-    def _shade_shadows(ground: np.ndarray, points: np.ndarray, vertices: np.ndarray) -> None:
-        """Darken `ground` (R, W, 3) in place: a soft blob under each body, darker where its lowest
-        vertices touch (the contact cue). Only ground points within 1 m of a body are touched."""
+            window = _ground_window(camera, view.first, np.asarray(goal[:2], dtype=np.float64), goal_radius)
+            if window is not None:
+                rows, columns = window
+                to_goal = np.hypot(points[rows, columns, 0] - goal[0], points[rows, columns, 1] - goal[1])
+                inside = to_goal < goal_radius
+                rows, columns, to_goal = rows[inside], columns[inside], to_goal[inside]
+                ground[rows, columns] = np.where((to_goal > goal_radius * 0.85)[:, None], GOAL, 0.6 * ground[rows, columns] + 0.4 * GOAL)
         for body in vertices:  # a handful of bodies per image
-            centre = body[:, :2].mean(axis=0)
-            near = np.nonzero((np.abs(points[..., 0] - centre[0]) < 1.0) & (np.abs(points[..., 1] - centre[1]) < 1.0))
-            if len(near[0]) == 0:
-                continue
-            local = points[near]
-            factor = 1.0 - 0.25 * np.exp(-np.sum((local - centre) ** 2, axis=-1) / (2 * 0.25**2))
-            low = body[body[:, 2] < 0.03]  # vertices within 3 cm of the ground
-            for contact in low[:: max(1, len(low) // 24), :2]:
-                factor *= 1.0 - 0.5 * np.exp(-np.sum((local - contact) ** 2, axis=-1) / (2 * 0.05**2))
-            ground[near] *= factor[:, None].astype(np.float32)
+            _shade_shadow(ground, points, camera, view.first, body)
+        image[view.first :] = ground
+        return image, depth
 
-    def _cast_bodies(self, vertices: np.ndarray, camera: Camera, directions: np.ndarray):
-        """Rays of the pixels the bodies' projection covers -> (rows, columns, unit normals) of hits, or None."""
+    def _draw_bodies(self, image: np.ndarray, depth: np.ndarray, vertices: np.ndarray, camera: Camera,
+                     directions: np.ndarray) -> None:  # fmt: skip
+        """Cast the rays of the pixels the bodies' projection covers; paint shaded wood where a body is nearest."""
         bodies, count = vertices.shape[:2]
         flat = vertices.reshape(-1, 3)
-        pixels, in_front = camera.project(flat)
-        if not in_front.any():
-            return None
-        low = np.floor(pixels[in_front].min(axis=0)).astype(int) - 2
-        high = np.ceil(pixels[in_front].max(axis=0)).astype(int) + 2
-        row_range = np.arange(max(low[0], 0), min(high[0], camera.height))
-        column_range = np.arange(max(low[1], 0), min(high[1], camera.width))
-        if len(row_range) == 0 or len(column_range) == 0:
-            return None
-        rows, columns = np.meshgrid(row_range, column_range, indexing="ij")
-        rays = directions[rows, columns].reshape(-1, 3).astype(np.float32)
-        origins = np.broadcast_to(np.asarray(camera.eye, dtype=np.float32), rays.shape).copy()
+        window = _pixel_window(camera, flat)
+        if window is None:
+            return
+        rows, columns = window
+        rays = directions[rows, columns]
         faces = (self.mesh.faces[None] + (np.arange(bodies) * count)[:, None, None]).reshape(-1, 3)
-        scene = rtcore_scene.EmbreeScene()
-        TriangleMesh(scene, flat.astype(np.float32), faces.astype(np.int32))
-        result = scene.run(origins, rays, output=1)
-        hits = result["primID"] >= 0
-        if not hits.any():
-            return None
-        triangles = flat[faces[result["primID"][hits]]]
-        normals = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
-        normals /= np.linalg.norm(normals, axis=-1, keepdims=True) + 1e-12
-        normals *= -np.sign(np.sum(normals * rays[hits], axis=-1, keepdims=True))  # face the camera
-        return rows.reshape(-1)[hits], columns.reshape(-1)[hits], normals
+        triangle, distance = RayCaster(flat, faces).cast(np.broadcast_to(camera.eye, rays.shape), rays)
+        front = distance < depth[rows, columns]
+        if not front.any():
+            return
+        rows, columns, triangle = rows[front], columns[front], triangle[front]
+        depth[rows, columns] = distance[front]
+        image[rows, columns] = WOOD * _lambert(flat[faces[triangle]], rays[front])[:, None]
 
-    @staticmethod
-    def _draw_trail(image: np.ndarray, camera: Camera, trail: np.ndarray, occupied) -> None:
-        """Pelvis trail on the ground as 2-px dots, densified along each segment, hidden behind bodies."""
-        ground = np.asarray(trail, dtype=np.float64).copy()
-        ground[:, 2] = 0.0
-        steps = np.linspace(0.0, 1.0, 6)[:-1]
-        dense = (ground[:-1, None] + (ground[1:] - ground[:-1])[:, None] * steps[None, :, None]).reshape(-1, 3)
-        pixels, in_front = camera.project(np.concatenate([dense, ground[-1:]]))
-        pixels = np.round(pixels[in_front]).astype(int)
-        mask = np.zeros(image.shape[:2], dtype=bool)
-        for dr in (0, 1):
-            for dc in (0, 1):
-                r, c = pixels[:, 0] + dr, pixels[:, 1] + dc
-                keep = (r >= 0) & (r < image.shape[0]) & (c >= 0) & (c < image.shape[1])
-                mask[r[keep], c[keep]] = True
-        if occupied is not None:
-            mask[occupied] = False
-        image[mask] = TRAIL
+
+class _CutawayScene:
+    """A scene's walls and furniture with every vertex lowered to at most `height` (boxes stay boxes, other
+shapes flatten at the cut; floors are drawn as the analytic ground), ready to cast."""
+
+    def __init__(self, scene: Scene, height: float) -> None:
+        meshes, labels = [], []
+        for part in scene.parts:
+            if part.label == FLOOR:
+                continue
+            vertices = part.mesh.vertices.copy()
+            vertices[:, 2] = np.minimum(vertices[:, 2], height)  # a box stays a box, lower
+            meshes.append(trimesh.Trimesh(vertices, part.mesh.faces, process=False))
+            labels.append(np.full(len(part.mesh.faces), part.label))
+        combined = trimesh.util.concatenate(meshes)
+        self.caster = RayCaster(combined.vertices, combined.faces)
+        self.normals = combined.face_normals.astype(np.float32)  # (F, 3)
+        colours = (PALETTE.astype(np.float32) / 255.0)[np.concatenate(labels)]
+        self.shaded = np.stack([colours * _shade(self.normals)[:, None], colours * _shade(-self.normals)[:, None]])  # (2, F, 3)
+        self.bounds = combined.bounds
+
+    def draw(self, image: np.ndarray, depth: np.ndarray, camera: Camera, directions: np.ndarray) -> None:
+        """Cast the pixels in the screen box of the scene's bounding box (all, with the eye inside it); paint
+        where the scene is nearest, each face lit from the side the camera sees."""
+        corners = np.array([[x, y, z] for x in self.bounds[:, 0] for y in self.bounds[:, 1] for z in self.bounds[:, 2]])
+        inside = np.all((camera.eye >= self.bounds[0]) & (camera.eye <= self.bounds[1]))
+        if inside or not camera.project(corners)[1].all():
+            rows, columns = np.indices((camera.height, camera.width)).reshape(2, -1)
+        else:
+            window = _pixel_window(camera, corners)
+            if window is None:
+                return
+            rows, columns = window
+        rays = directions[rows, columns]
+        triangle, distance = self.caster.cast(np.broadcast_to(camera.eye, rays.shape), rays)
+        front = distance < depth[rows, columns]
+        rows, columns, triangle, rays = rows[front], columns[front], triangle[front], rays[front]
+        depth[rows, columns] = distance[front]
+        back = (np.einsum("rk,rk->r", self.normals[triangle], rays) > 0).astype(np.int64)
+        image[rows, columns] = self.shaded[back, triangle]
+
+
+@dataclass(frozen=True)
+class _GroundView:
+    """What a camera orientation and eye height fix about the ground: sky image (H, W, 3), depth (H, W), first
+    ground row, and for the R ground rows the hit offsets from the eye (R, W, 2), the grid line half-width (R, W)
+    and the faded plain and line colours (R, W, 3)."""
+
+    sky: np.ndarray
+    depth: np.ndarray
+    first: int
+    offsets: np.ndarray
+    line_width: np.ndarray
+    plain_colour: np.ndarray
+    line_colour: np.ndarray
+
+
+@lru_cache(maxsize=8)
+def _ground_view(width: int, height: int, fov: float, forward: tuple, right: tuple, eye_height: float) -> _GroundView:
+    """The camera has no roll, so the ground is the rows below the horizon (rows run from up > 0 to up < 0)."""
+    directions = pinhole_rays(width, height, fov, forward, right)
+    up = directions[:, 0, 2]
+    sky = np.empty(directions.shape, dtype=np.float32)
+    sky[:] = (SKY_BOTTOM + (SKY_TOP - SKY_BOTTOM) * np.clip(up, 0.0, 1.0)[:, None])[:, None, :]
+    depth = np.full(directions.shape[:2], np.inf, dtype=np.float32)
+    first = int(np.searchsorted(-up, 1e-4))
+    rays = directions[first:]
+    distance = np.float32(-eye_height) / rays[..., 2]
+    depth[first:] = distance
+    fade = np.exp(-distance / 25.0)[..., None]  # far ground fades into the horizon
+    faded = [((colour * fade + SKY_BOTTOM[0] * (1.0 - fade)) * (GROUND / GROUND[0])).astype(np.float32) for colour in (GROUND[0], GRID[0])]
+    offsets = (distance[..., None] * rays[..., :2]).astype(np.float32)
+    line_width = np.clip(0.004 * distance, 0.01, 0.06).astype(np.float32)
+    return _GroundView(sky, depth, first, offsets, line_width, faded[0], faded[1])
+
+
+def _ground_window(camera: Camera, first: int, centre: np.ndarray, half: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """(rows, columns) into the ground rows of the pixels whose screen box covers the ground square of
+    half-size `half` around `centre` (2,)."""
+    corners = np.array([[centre[0] + dx * half, centre[1] + dy * half, 0.0] for dx in (-1, 1) for dy in (-1, 1)])
+    window = _pixel_window(camera, corners)
+    if window is None:
+        return None
+    rows, columns = window
+    keep = rows >= first
+    return rows[keep] - first, columns[keep]
+
+
+def _shade_shadow(ground: np.ndarray, points: np.ndarray, camera: Camera, first: int, body: np.ndarray) -> None:
+    """Darken `ground` (R, W, 3) in place: a soft blob under the body (V, 3), darker where its lowest vertices
+    touch (the contact cue). Only ground within 1 m of the body's centre is touched."""
+    centre = body[:, :2].mean(axis=0)
+    window = _ground_window(camera, first, centre, 1.0)
+    if window is None:
+        return
+    rows, columns = window
+    local = points[rows, columns]
+    near = np.nonzero(np.abs(local - centre).max(axis=-1) < 1.0)[0]
+    rows, columns, local = rows[near], columns[near], local[near]
+    factor = 1.0 - 0.25 * np.exp(-np.sum((local - centre) ** 2, axis=-1) / (2 * 0.25**2))
+    low = body[body[:, 2] < 0.03, :2]  # vertices within 3 cm of the ground
+    if len(low):
+        contacts = low[:: max(1, len(low) // 24)]
+        close = np.nonzero(((local >= contacts.min(axis=0) - 0.2) & (local <= contacts.max(axis=0) + 0.2)).all(axis=-1))[0]
+        squared = np.sum((local[close, None, :] - contacts[None]) ** 2, axis=-1)
+        factor[close] *= np.prod(1.0 - 0.5 * np.exp(-squared / (2 * 0.05**2)), axis=1)
+    ground[rows, columns] *= factor[:, None].astype(np.float32)
+
+
+def _lambert(triangles: np.ndarray, rays: np.ndarray) -> np.ndarray:
+    """Shade (R,) of hit triangles (R, 3, 3) seen along `rays` (R, 3), on the side the rays see."""
+    normals = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+    normals /= np.linalg.norm(normals, axis=-1, keepdims=True) + 1e-12
+    normals *= -np.sign(np.sum(normals * rays, axis=-1, keepdims=True))  # face the camera
+    return _shade(normals)
+
+
+def _shade(normals: np.ndarray) -> np.ndarray:
+    """Ambient + diffuse from LIGHT for unit normals (..., 3)."""
+    return 0.35 + 0.65 * np.clip(normals @ LIGHT, 0.0, None)
+
+
+def _pixel_window(camera: Camera, points: np.ndarray, pad: int = 2) -> tuple[np.ndarray, np.ndarray] | None:
+    """Flat (rows, columns) of the pixels in the screen box of `points` (P, 3), or None when it is empty."""
+    pixels, in_front = camera.project(points)
+    if not in_front.any():
+        return None
+    low = np.floor(pixels[in_front].min(axis=0)).astype(int) - pad
+    high = np.ceil(pixels[in_front].max(axis=0)).astype(int) + pad
+    row_range = np.arange(max(low[0], 0), min(high[0], camera.height))
+    column_range = np.arange(max(low[1], 0), min(high[1], camera.width))
+    if len(row_range) == 0 or len(column_range) == 0:
+        return None
+    rows, columns = np.meshgrid(row_range, column_range, indexing="ij")
+    return rows.reshape(-1), columns.reshape(-1)
+
+
+def _draw_sphere(image: np.ndarray, depth: np.ndarray, camera: Camera, directions: np.ndarray, centre: np.ndarray,
+                 radius: float) -> None:  # fmt: skip
+    """A shaded goal sphere, analytic per pixel of its screen box, where it is nearest."""
+    offsets = np.array([[dx, dy, dz] for dx in (-1, 1) for dy in (-1, 1) for dz in (-1, 1)]) * radius
+    window = _pixel_window(camera, centre + offsets)
+    if window is None:
+        return
+    rows, columns = window
+    rays = directions[rows, columns].astype(np.float64)
+    to_centre = centre - camera.eye
+    along = rays @ to_centre
+    miss = to_centre @ to_centre - along**2
+    entry = along - np.sqrt(np.clip(radius**2 - miss, 0.0, None))
+    hit = (miss <= radius**2) & (entry > 0) & (entry < depth[rows, columns])
+    if not hit.any():
+        return
+    normals = (camera.eye + entry[hit, None] * rays[hit] - centre) / radius
+    image[rows[hit], columns[hit]] = GOAL * (0.45 + 0.55 * np.clip(normals @ LIGHT, 0.0, None))[:, None]
+    depth[rows[hit], columns[hit]] = entry[hit]
+
+
+def _draw_trail(image: np.ndarray, depth: np.ndarray, camera: Camera, trail: np.ndarray) -> None:
+    """Pelvis trail on the ground as 2-px dots, densified along each segment, hidden where something is nearer."""
+    ground = np.asarray(trail, dtype=np.float64).copy()
+    ground[:, 2] = 0.0
+    steps = np.linspace(0.0, 1.0, 6)[:-1]
+    dense = np.concatenate([(ground[:-1, None] + (ground[1:] - ground[:-1])[:, None] * steps[None, :, None]).reshape(-1, 3), ground[-1:]])
+    pixels, in_front = camera.project(dense)
+    distance = np.linalg.norm(dense - camera.eye, axis=-1)[in_front]
+    pixels = np.round(pixels[in_front]).astype(int)
+    for dr in (0, 1):
+        for dc in (0, 1):
+            r, c = pixels[:, 0] + dr, pixels[:, 1] + dc
+            keep = (r >= 0) & (r < image.shape[0]) & (c >= 0) & (c < image.shape[1])
+            r, c = r[keep], c[keep]
+            visible = distance[keep] <= depth[r, c] * 1.02 + 0.05
+            image[r[visible], c[visible]] = TRAIL

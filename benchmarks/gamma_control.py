@@ -34,27 +34,24 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-import matplotlib
+import numpy as np
+import torch
+from tqdm import tqdm
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import torch  # noqa: E402
-from tqdm import tqdm  # noqa: E402
-
-from agents.controllers import PolicyLatent  # noqa: E402
-from baselines.g_cvae import G_CVAE_WEIGHTS, goal_cvae_generator  # noqa: E402
-from baselines.latent_controllers import RandomLatent  # noqa: E402
-from benchmarks.machine import machine_line  # noqa: E402
-from motion_envs.atomic import atomic_write  # noqa: E402
-from motion_envs.body.markers import foot_vertex_ids  # noqa: E402
-from motion_envs.data.primitives import GAMMA_FPS  # noqa: E402
-from motion_envs.envs.gamma_reach import GammaReachConfig, GammaReachCore, GammaReachState, GammaStepResult  # noqa: E402
-from motion_envs.metrics import foot_skating, skating_threshold  # noqa: E402
-from motion_envs.priors.canonical import PELVIS  # noqa: E402
-from motion_envs.priors.gamma_generator import GammaGenerator  # noqa: E402
-from motion_envs.priors.training import WEIGHTS_DIR  # noqa: E402
-from motion_envs.wrappers.tree_search import SearchCost, SearchSettings, beam_search  # noqa: E402
+from agents.controllers import PolicyLatent
+from baselines.g_cvae import G_CVAE_WEIGHTS, goal_cvae_generator
+from baselines.latent_controllers import RandomLatent
+from benchmarks.machine import machine_line
+from motion_envs.plots import grid_of_axes, save, top_down
+from motion_envs.atomic import atomic_write
+from motion_envs.body.markers import foot_vertex_ids
+from motion_envs.data.primitives import GAMMA_FPS
+from motion_envs.envs.gamma_reach import GammaReachConfig, GammaReachCore, GammaReachState, GammaStepResult
+from motion_envs.metrics import foot_skating, skating_threshold
+from motion_envs.priors.canonical import PELVIS
+from motion_envs.priors.gamma_generator import GammaGenerator
+from motion_envs.priors.training import WEIGHTS_DIR
+from motion_envs.wrappers.tree_search import SearchCost, SearchSettings, beam_search
 
 RESULTS = Path(__file__).resolve().parent / "results"
 PAPER_ROWS = {  # GAMMA Table 1: steps, success rate, avg. dist., contact score
@@ -220,17 +217,9 @@ def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False,
     print(text)
     RESULTS.mkdir(parents=True, exist_ok=True)
     atomic_write(RESULTS / f"gamma_control{name_suffix}.md", lambda file: file.write(text.encode()))
-    columns = min(4, len(rows))
-    figure, axes = plt.subplots(-(-len(rows) // columns), columns, figsize=(4 * columns, 4 * -(-len(rows) // columns)),
-                                squeeze=False)  # fmt: skip
+    figure, axes = grid_of_axes(len(rows))
     goals = start.goal[:, :2].numpy()
-    for axis in axes.flat[len(rows) :]:
-        axis.axis("off")
-    for axis, (name, row) in zip(axes.flat, rows.items()):
-        for pair in range(pairs):
-            axis.plot(row["paths"][pair, :, 0], row["paths"][pair, :, 1], linewidth=0.8)  # NaN after the pair ends
-        axis.scatter(goals[:, 0], goals[:, 1], marker="x", color="black", s=12)
-        axis.set(title=f"{name}: {row['success rate']:.2f}", xlim=(-10, 10), ylim=(-10, 10), aspect="equal")
-    figure.tight_layout()
-    atomic_write(RESULTS / f"gamma_control{name_suffix}.png", lambda file: figure.savefig(file, format="png", dpi=80))
+    for axis, (name, row) in zip(axes, rows.items()):
+        top_down(axis, row["paths"], goals, title=f"{name}: {row['success rate']:.2f}", extent=10.0)  # NaN after a pair ends
+    save(figure, RESULTS / f"gamma_control{name_suffix}.png", dpi=80)
     return 0

@@ -18,25 +18,22 @@ import json
 import time
 from pathlib import Path
 
-import matplotlib
+import numpy as np
+import torch
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import torch  # noqa: E402
-
-from benchmarks.machine import machine_line  # noqa: E402
-from motion_envs.atomic import atomic_write  # noqa: E402
-from motion_envs.body import BodyModel  # noqa: E402
-from motion_envs.body.markers import foot_vertex_ids, marker_ids  # noqa: E402
-from motion_envs.data.build import build  # noqa: E402
-from motion_envs.data.dataset import MotionDataset  # noqa: E402
-from motion_envs.data.primitives import GAMMA_FPS, PRIMITIVE_FRAMES  # noqa: E402
-from motion_envs.data.start_poses import load_start_poses  # noqa: E402
-from motion_envs.metrics import contact_score, foot_skating, skating_threshold  # noqa: E402
-from motion_envs.priors.canonical import PELVIS  # noqa: E402
-from motion_envs.priors.gamma_generator import GammaGenerator  # noqa: E402
-from motion_envs.priors.training import WEIGHTS_DIR  # noqa: E402
+from benchmarks.machine import machine_line
+from motion_envs.plots import plt, save, top_down
+from motion_envs.atomic import atomic_write
+from motion_envs.body import BodyModel
+from motion_envs.body.markers import foot_vertex_ids, marker_ids
+from motion_envs.data.build import build
+from motion_envs.data.dataset import MotionDataset
+from motion_envs.data.primitives import GAMMA_FPS, PRIMITIVE_FRAMES
+from motion_envs.data.start_poses import load_start_poses
+from motion_envs.metrics import contact_score, foot_skating, skating_threshold
+from motion_envs.priors.canonical import PELVIS
+from motion_envs.priors.gamma_generator import GammaGenerator
+from motion_envs.priors.training import WEIGHTS_DIR
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -59,7 +56,7 @@ def prior_lines() -> list[str]:
             "|---|" + "---|" * (len(errors["primitive"]) + 1),
             "| one primitive | " + " | ".join(f"{e:.2f}" for e in errors["primitive"]) + f" | {np.mean(errors['primitive']):.2f} |",
             "",
-            f"8-primitive rollout (each seeded by the previous prediction), per frame: "
+            "8-primitive rollout (each seeded by the previous prediction), per frame: "
             + ", ".join(f"{e:.1f}" for e in errors[rollout]) + f"; mean {np.mean(errors[rollout]):.2f}.",
             "",
         ]
@@ -166,12 +163,6 @@ def main(mocap_dir: Path | None = None, cache_dir: Path | None = None, subsets: 
     RESULTS.mkdir(parents=True, exist_ok=True)
     atomic_write(RESULTS / "gamma_realism.md", lambda file: file.write(text.encode()))
     figure, axis = plt.subplots(figsize=(5, 5))
-    for path in pelvis[:: max(1, rollouts // 2), :, :2].numpy():
-        axis.plot(path[:, 0], path[:, 1], linewidth=0.8)
-    axis.set_aspect("equal")
-    axis.set_title(f"pelvis paths, random z, {frames / GAMMA_FPS:.1f} s")
-    axis.set_xlabel("x (m)")
-    axis.set_ylabel("y (m)")
-    figure.tight_layout()
-    atomic_write(RESULTS / "gamma_realism_paths.png", lambda file: figure.savefig(file, format="png", dpi=120))
+    top_down(axis, pelvis[:: max(1, rollouts // 2), :, :2].numpy(), title=f"pelvis paths, random z, {frames / GAMMA_FPS:.1f} s")
+    save(figure, RESULTS / "gamma_realism_paths.png", dpi=120)
     return 0

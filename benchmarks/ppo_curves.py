@@ -11,13 +11,9 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-
-from motion_envs.atomic import atomic_write  # noqa: E402
-from motion_envs.priors.training import WEIGHTS_DIR  # noqa: E402
+from motion_envs.atomic import atomic_write
+from motion_envs.plots import learning_curves, plt, save
+from motion_envs.priors.training import WEIGHTS_DIR
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -37,24 +33,20 @@ def main() -> int:
              "|---|---|---|---|---|---|---|"]  # fmt: skip
     for name, entry in runs.items():
         curve = entry["curve"]
-        steps = [point["timesteps"] for point in curve]
         rates = [point["success_rate"] for point in curve]
-        minutes = [point["wall_seconds"] / 60 for point in curve]
         label = Path(name).stem.removeprefix("ppo_")
-        by_steps.plot(steps, rates, label=label)
-        by_time.plot(minutes, rates, label=label)
         best = max(curve, key=lambda point: point["success_rate"])
         lines.append(f"| {label} | `{entry['config']['command']}` | {rates[0]:.2f} | {best['success_rate']:.2f} | "
                      f"{best['timesteps']:,} | {best['wall_seconds'] / 60:.0f} | {entry['timesteps']:,} |")  # fmt: skip
-    by_steps.set(xlabel="env steps (GammaReach: primitives; WandrReach: frames)", ylabel="success rate (per body)", ylim=(0, 1))
-    by_time.set(xlabel="wall time (min)", ylim=(0, 1))
-    by_steps.legend()
-    figure.tight_layout()
+    curves = {Path(name).stem.removeprefix("ppo_"): entry["curve"] for name, entry in runs.items()}
+    learning_curves(by_steps, by_time, curves, steps_label="env steps (GammaReach: primitives; WandrReach: frames)")
+    by_steps.set(ylabel="success rate (per body)", ylim=(0, 1))
+    by_time.set(ylim=(0, 1))
     lines += ["", "![curves](ppo_curves.png)", ""]
     text = "\n".join(lines)
     print(text)
     atomic_write(RESULTS / "ppo_curves.md", lambda file: file.write(text.encode()))
-    atomic_write(RESULTS / "ppo_curves.png", lambda file: figure.savefig(file, format="png", dpi=90))
+    save(figure, RESULTS / "ppo_curves.png", dpi=90)
     return 0
 
 

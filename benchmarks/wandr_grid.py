@@ -32,22 +32,19 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-import matplotlib
+import numpy as np
+import torch
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import torch  # noqa: E402
-
-from baselines.latent_optimisation import LatentSequence, optimise_latents  # noqa: E402
-from baselines.wandr_sampler import Controller, WandrSampler, roll_out  # noqa: E402
-from benchmarks.machine import machine_line  # noqa: E402
-from benchmarks.sections import replace_section  # noqa: E402
-from motion_envs.atomic import atomic_write  # noqa: E402
-from motion_envs.envs.wandr_reach import WandrReachConfig, WandrReachCore, WandrReachState  # noqa: E402
-from motion_envs.priors.train_wandr import load_wandr  # noqa: E402
-from motion_envs.priors.training import WEIGHTS_DIR  # noqa: E402
-from motion_envs.priors.wandr import WandrStepper  # noqa: E402
+from baselines.latent_optimisation import LatentSequence, optimise_latents
+from baselines.wandr_sampler import Controller, WandrSampler, roll_out
+from benchmarks.machine import machine_line
+from benchmarks.sections import replace_section
+from motion_envs.atomic import atomic_write
+from motion_envs.envs.wandr_reach import WandrReachConfig, WandrReachCore, WandrReachState
+from motion_envs.priors.train_wandr import load_wandr
+from motion_envs.priors.training import WEIGHTS_DIR
+from motion_envs.priors.wandr import WandrStepper
+from motion_envs.plots import plt, save, success_by
 
 RESULTS = Path(__file__).resolve().parent / "results"
 ANGLES, HEIGHTS, DISTANCES = 5, 5, 5
@@ -166,18 +163,14 @@ def success_by_cell(reached: torch.Tensor, cells: dict[str, torch.Tensor]) -> di
 def figure(by_cell: dict[str, np.ndarray], path: Path, title: str) -> None:
     """The paper's Figure 5: SR by height, angle and distance."""
     angles, heights, distances = grid_values()
-    ticks = {"height": [f"{h:.2f}" for h in heights.tolist()], "angle": [f"{math.degrees(a):.0f}°" for a in angles.tolist()],
-             "distance": [f"{d:.2f}" for d in distances.tolist()]}  # fmt: skip
-    fig, axes = plt.subplots(1, 3, figsize=(11, 3.2), sharey=True)
-    for axis, (name, colour) in zip(axes, (("height", "#d9a400"), ("angle", "#2e9e4f"), ("distance", "#2f6fd0"))):
-        axis.bar(ticks[name], by_cell[name], color=colour)
-        axis.set_xlabel(f"goal {name}" + (" (m)" if name != "angle" else " from the body's forward"))
-        axis.grid(axis="y", alpha=0.3)
-    axes[0].set_ylabel("success rate (%)")
-    fig.suptitle(title)
-    fig.tight_layout()
-    atomic_write(path, lambda file: fig.savefig(file, format="png", dpi=110))
-    plt.close(fig)
+    figure_, axes = plt.subplots(1, 3, figsize=(11, 3.2), sharey=True)
+    success_by(axes, {
+        "goal height (m)": ([f"{h:.2f}" for h in heights.tolist()], by_cell["height"]),
+        "goal angle from the body's forward": ([f"{math.degrees(a):.0f}°" for a in angles.tolist()], by_cell["angle"]),
+        "goal distance (m)": ([f"{d:.2f}" for d in distances.tolist()], by_cell["distance"]),
+    })  # fmt: skip
+    figure_.suptitle(title)
+    save(figure_, path, dpi=110)
 
 
 def main(quick: bool = False, seed: int = 0, weights_dir: Path | None = None, policies: list[Path] | None = None,

@@ -32,7 +32,6 @@ from typing import TypeVar
 
 import torch
 
-from motion_envs.metrics import marker_speeds
 from motion_envs.priors.canonical import LEFT_HIP, PELVIS, RIGHT_HIP
 
 

@@ -22,7 +22,7 @@ from collections.abc import Callable
 import numpy as np
 import trimesh
 
-from motion_envs.scenes.furniture import PIECES, Box, footprint
+from motion_envs.scenes.furniture import PIECES, footprint
 from motion_envs.scenes.labels import label_id
 from motion_envs.scenes.scene import Scene, ScenePart
 

@@ -98,18 +98,16 @@ def load_scene(path: str | Path, name: str | None = None) -> Scene:
         loaded = trimesh.load(path, process=False)
     except Exception as error:  # trimesh raises many types for unreadable files
         raise ValueError(f"cannot read scene file {path}: {error}") from error
-    meshes = loaded.dump(concatenate=False) if isinstance(loaded, trimesh.Scene) else [loaded]
     if isinstance(loaded, trimesh.Scene):
-        names = [geometry_name for geometry_name in loaded.graph.nodes_geometry]
+        names = list(loaded.graph.nodes_geometry)
         meshes = [loaded.geometry[loaded.graph[node][1]].copy().apply_transform(loaded.graph[node][0]) for node in names]
     else:
-        names = [path.stem]
+        names, meshes = [path.stem], [loaded]
     parts = []
     for node_name, mesh in zip(names, meshes):
         if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
             continue
-        labels = mesh.metadata.get("_ply_raw", {}).get("face", {}).get("data", {})
-        face_labels = labels["label"] if "label" in getattr(labels, "dtype", np.dtype([])).names or () else None
+        face_labels = _ply_face_labels(mesh)
         if face_labels is None:
             parts.append(ScenePart(mesh, label_from_name(node_name)))
             continue
@@ -120,3 +118,11 @@ def load_scene(path: str | Path, name: str | None = None) -> Scene:
     if not parts:
         raise ValueError(f"{path} holds no triangle mesh")
     return Scene(parts, name or path.stem)
+
+
+def _ply_face_labels(mesh: trimesh.Trimesh) -> np.ndarray | None:
+    """(F,) ints from a PLY face property `label` (trimesh keeps it in the raw PLY metadata), or None."""
+    faces = mesh.metadata.get("_ply_raw", {}).get("face", {}).get("data", {})
+    if "label" not in faces:
+        return None
+    return np.asarray(faces["label"]).reshape(-1).astype(np.int64)

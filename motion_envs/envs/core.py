@@ -12,6 +12,8 @@ import torch
 from gymnasium.vector import AutoresetMode, VectorEnv
 
 from motion_envs.batched import BatchedState
+from motion_envs.body import BodyModel
+from motion_envs.render.env_view import EnvView, RenderInputs
 
 Config = TypeVar("Config")
 
@@ -52,16 +54,30 @@ class BatchedCore(Protocol):
 
     def step(self, state: Any, z: torch.Tensor) -> tuple[Any, Any]: ...
 
+    body: BodyModel
+    goal_marker: tuple[str, float]
+
+    def render_inputs(self, state: Any) -> RenderInputs: ...
+
 
 class CoreVectorEnv(VectorEnv):
     """N bodies of one batched core; same-step autoreset (ended bodies restart at once, without options,
     as Gymnasium's own vector envs do; their last observation and info are in `info["final_obs"]` /
-    `info["final_info"]`). Subclasses build the core and say what goes into `info` (`_step_info`)."""
+    `info["final_info"]`). Subclasses build the core and say what goes into `info` (`_step_info`).
 
-    metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
+    `render_mode="rgb_array"`: `render()` draws the first `render_bodies` bodies in one image (camera on
+    their mean pelvis), each with its goal and pelvis trail."""
+
+    metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": ["rgb_array"]}
 
     def __init__(self, core: BatchedCore, num_envs: int, single_action_space: gym.spaces.Box,
-                 single_observation_space: gym.spaces.Box) -> None:  # fmt: skip
+                 single_observation_space: gym.spaces.Box, render_mode: str | None = None,
+                 render_bodies: int = 8) -> None:  # fmt: skip
+        if render_mode not in (None, *self.metadata["render_modes"]):
+            raise ValueError(f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}")
+        self.render_mode, self.render_bodies = render_mode, render_bodies
+        self._view: EnvView | None = None
+        self.trails: list[list[np.ndarray]] = []
         self.core = core
         self.num_envs = num_envs
         self.single_action_space, self.single_observation_space = single_action_space, single_observation_space
@@ -75,6 +91,8 @@ class CoreVectorEnv(VectorEnv):
             seeds = seed if isinstance(seed, list) else [seed + i for i in range(self.num_envs)]
             self.rngs = [np.random.default_rng(s) for s in seeds]  # body i follows the single env reset with seed + i
         self.state = self.core.sample_initial_state(self.rngs, options)
+        if self.render_mode is not None:
+            self.trails = [[pelvis] for pelvis in self._drawn_pelvis()]
         return self.core.observe(self.state).cpu().numpy(), {}
 
     def _step_info(self, result: Any) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
@@ -101,5 +119,20 @@ class CoreVectorEnv(VectorEnv):
             order[ended] = torch.arange(len(ended))  # fresh body k goes to row ended[k]; other rows are masked
             self.state = self.state.replace_bodies(done.to(self.core.device), fresh.index(order.to(self.core.device)))
             observation = self.core.observe(self.state).cpu().numpy()
+        if self.render_mode is not None:
+            for trail, pelvis, restarted in zip(self.trails, self._drawn_pelvis(), done.tolist()):
+                trail[:] = [pelvis] if restarted else [*trail, pelvis]
         return (observation, result.reward.cpu().numpy().astype(np.float64), result.terminated.cpu().numpy(),
                 result.truncated.cpu().numpy(), info)  # fmt: skip
+
+    def render(self) -> np.ndarray | None:
+        """rgb_array: (H, W, 3) uint8 of the first `render_bodies` bodies (None without a render mode)."""
+        if self.render_mode is None or self.state is None:
+            return None
+        if self._view is None:
+            self._view = EnvView(self.core.body, *self.core.goal_marker, max_bodies=self.render_bodies)
+        return self._view.frame(self.core.render_inputs(self.state), [np.array(trail) for trail in self.trails])
+
+    def _drawn_pelvis(self) -> np.ndarray:
+        """(min(N, render_bodies), 3) pelvis positions of the bodies a render draws."""
+        return self.core.render_inputs(self.state).pelvis[: self.render_bodies].detach().cpu().numpy()

@@ -75,6 +75,7 @@ import roma
 import torch
 
 from motion_envs.batched import BatchedState
+from motion_envs.body import BodyModel
 from motion_envs.body.markers import foot_vertex_ids
 from motion_envs.data.primitives import GAMMA_FPS
 from motion_envs.data.start_poses import load_start_poses
@@ -82,6 +83,7 @@ from motion_envs.envs.core import CoreVectorEnv, check_actions, config_from_kwar
 from motion_envs.metrics import contact_score, marker_speeds
 from motion_envs.priors.canonical import PELVIS, goal_observation
 from motion_envs.priors.gamma_generator import GammaGenerator, GammaSeed, Primitive
+from motion_envs.render.env_view import EnvView, RenderInputs
 from motion_envs.rewards import (
     RewardConfig,
     contact_reward,
@@ -213,6 +215,20 @@ class GammaReachCore:
         return self.initial_state(torch.tensor(rows), torch.tensor(facings, dtype=torch.float32),
                                   torch.as_tensor(np.stack(goals), dtype=torch.float32))  # fmt: skip
 
+    @property
+    def body(self) -> BodyModel:
+        return self.generator.body
+
+    @property
+    def goal_marker(self) -> tuple[str, float]:
+        """How renders draw the goal: a ring of the success radius on the ground."""
+        return "ring", self.config.goal_radius
+
+    def render_inputs(self, state: GammaReachState) -> RenderInputs:
+        """The bodies as they stand at the last frame of their latest primitive, with their goals."""
+        seed = state.seed
+        return RenderInputs(seed.transl[:, -1], seed.global_orient[:, -1], seed.body_pose[:, -1], seed.joints[:, -1, PELVIS], state.goal)
+
     def observe(self, state: GammaReachState) -> torch.Tensor:
         """(N, 804): per seed frame, canonical markers and unit marker-to-goal vectors (Eq. 3)."""
         seed = state.seed
@@ -285,7 +301,7 @@ class GammaReachEnv(gym.Env):
         self.state: GammaReachState | None = None
         self.last_primitive: Primitive | None = None
         self.trail: list[np.ndarray] = []
-        self._renderer = None
+        self._view: EnvView | None = None
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
@@ -309,16 +325,9 @@ class GammaReachEnv(gym.Env):
         """rgb_array: the body now (last frame), its goal and pelvis trail, from a camera that follows it."""
         if self.render_mode is None or self.state is None:
             return None
-        from motion_envs.render.camera import follow_camera
-        from motion_envs.render.third_person import ThirdPersonRenderer
-
-        if self._renderer is None:
-            self._renderer = ThirdPersonRenderer(self.core.generator.body)
-        seed = self.state.seed.to("cpu")
-        vertices = self._renderer.vertices(seed.transl[:, -1], seed.global_orient[:, -1], seed.body_pose[:, -1])
-        goal = self.state.goal[0].cpu().numpy()
-        camera = follow_camera(self.trail[-1])
-        return self._renderer.render(vertices, camera, goal=goal, goal_radius=self.config.goal_radius, trail=np.array(self.trail))
+        if self._view is None:
+            self._view = EnvView(self.core.body, *self.core.goal_marker, max_bodies=1)
+        return self._view.frame(self.core.render_inputs(self.state), [np.array(self.trail)])
 
     def _pelvis(self) -> np.ndarray:
         return self.state.seed.joints[0, -1, PELVIS].cpu().numpy()
@@ -330,12 +339,13 @@ class GammaReachEnv(gym.Env):
 class GammaReachVectorEnv(CoreVectorEnv):
     """N bodies in one batched core; same-step autoreset (see `CoreVectorEnv`)."""
 
-    def __init__(self, num_envs: int = 1, generator: GammaGenerator | None = None, **kwargs: Any) -> None:
+    def __init__(self, num_envs: int = 1, generator: GammaGenerator | None = None, render_mode: str | None = None,
+                 render_bodies: int = 8, **kwargs: Any) -> None:  # fmt: skip
         self.config = config_from_kwargs(GammaReachConfig, kwargs, "GammaReach-v0")
         core = GammaReachCore(self.config, generator)
         bound = self.config.latent_bound
         super().__init__(core, num_envs, gym.spaces.Box(-bound, bound, (core.generator.latent_size,), np.float32),
-                         gym.spaces.Box(-np.inf, np.inf, (OBSERVATION_SIZE,), np.float32))  # fmt: skip
+                         gym.spaces.Box(-np.inf, np.inf, (OBSERVATION_SIZE,), np.float32), render_mode, render_bodies)  # fmt: skip
         self.last_primitive: Primitive | None = None
 
     def _step_info(self, result: GammaStepResult) -> tuple[dict[str, Any], dict[str, np.ndarray]]:

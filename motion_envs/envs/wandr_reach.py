@@ -91,12 +91,14 @@ import torch
 
 from motion_envs.batched import BatchedState
 from motion_envs.body import BodyModel
+from motion_envs.body.rotations import matrix_to_sixd
 from motion_envs.data.start_poses import load_start_poses
 from motion_envs.envs.core import CoreVectorEnv, check_actions, config_from_kwargs
 from motion_envs.metrics import WANDR_SKATING_THRESHOLD
 from motion_envs.priors.train_wandr import load_wandr
 from motion_envs.priors.wandr import WandrPrior, WandrStepper
 from motion_envs.priors.wandr_features import FPS, PELVIS, RIGHT_WRIST, WandrState, heading, make_state, pose_delta
+from motion_envs.render.env_view import EnvView, RenderInputs
 from motion_envs.rewards import WandrRewardConfig, latent_cost, wrist_progress
 
 OBSERVATION_SIZE = 281
@@ -295,6 +297,15 @@ class WandrReachCore:
         return self.initial_state(start_index, facing, goals, torch.full((count,), goals.shape[1]), goal_time,
                                   velocity.expand(count, 3))  # fmt: skip
 
+    @property
+    def goal_marker(self) -> tuple[str, float]:
+        """How renders draw the goal: a sphere of the success radius (with its ring on the ground below)."""
+        return "sphere", self.config.success_radius
+
+    def render_inputs(self, state: WandrReachState) -> RenderInputs:
+        """The bodies now (rotations as 6-D), with their current goals."""
+        return RenderInputs(state.transl, matrix_to_sixd(state.orient), matrix_to_sixd(state.pose), state.joints[:, PELVIS], state.goal)
+
     def observe(self, state: WandrReachState) -> torch.Tensor:
         """(N, 281): the normalised condition, the goal in the heading frame, frames left / max_frames."""
         with torch.no_grad():
@@ -392,7 +403,7 @@ class WandrReachEnv(gym.Env):
         self.action_space, self.observation_space = _spaces(self.core)
         self.state: WandrReachState | None = None
         self.trail: list[np.ndarray] = []
-        self._renderer = None
+        self._view: EnvView | None = None
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
@@ -410,20 +421,12 @@ class WandrReachEnv(gym.Env):
                 _step_info(self.state, result, 0))  # fmt: skip
 
     def render(self) -> np.ndarray | None:
-        """rgb_array: the body now, the goal (ring on the ground below it) and the pelvis trail."""
+        """rgb_array: the body now, the goal (a sphere of the success radius) and the pelvis trail."""
         if self.render_mode is None or self.state is None:
             return None
-        from motion_envs.body.rotations import matrix_to_sixd
-        from motion_envs.render.camera import follow_camera
-        from motion_envs.render.third_person import ThirdPersonRenderer
-
-        if self._renderer is None:
-            self._renderer = ThirdPersonRenderer(self.core.body)
-        state = self.state.to("cpu")
-        vertices = self._renderer.vertices(state.transl, matrix_to_sixd(state.orient), matrix_to_sixd(state.pose))
-        goal = state.goal[0].numpy()
-        return self._renderer.render(vertices, follow_camera(self.trail[-1]), goal=goal, goal_radius=0.15,
-                                     trail=np.array(self.trail))  # fmt: skip
+        if self._view is None:
+            self._view = EnvView(self.core.body, *self.core.goal_marker, max_bodies=1)
+        return self._view.frame(self.core.render_inputs(self.state), [np.array(self.trail)])
 
     def _pelvis(self) -> np.ndarray:
         return self.state.joints[0, PELVIS].cpu().numpy()
@@ -435,10 +438,12 @@ class WandrReachEnv(gym.Env):
 class WandrReachVectorEnv(CoreVectorEnv):
     """N bodies in one batched core; same-step autoreset (see `CoreVectorEnv`)."""
 
-    def __init__(self, num_envs: int = 1, prior: WandrPrior | None = None, **kwargs: Any) -> None:
+    def __init__(self, num_envs: int = 1, prior: WandrPrior | None = None, render_mode: str | None = None,
+                 render_bodies: int = 8, **kwargs: Any) -> None:  # fmt: skip
         self.config = config_from_kwargs(WandrReachConfig, kwargs, "WandrReach-v0")
         core = WandrReachCore(self.config, prior)
-        super().__init__(core, num_envs, *_spaces(core))
+        super().__init__(core, num_envs, *_spaces(core), render_mode, render_bodies)
+        self.metadata = {**self.metadata, "render_fps": FPS / self.config.frames_per_step}
 
     def _step_info(self, result: WandrStepResult) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         state = self.state

@@ -77,28 +77,33 @@ class ThirdPersonRenderer:
         return self.body.skin_with_rows(posed, self.rows).numpy()
 
     def render(self, vertices: np.ndarray, camera: Camera, goal: np.ndarray | None = None, goal_radius: float = 0.75,
-               trail: np.ndarray | None = None, goal_shape: str = "ring") -> np.ndarray:  # fmt: skip
-        """One image. vertices: (B, V, 3) posed bodies from `vertices`; goal: (3,); trail: (T, 3).
+               trail: np.ndarray | list[np.ndarray] | None = None, goal_shape: str = "ring") -> np.ndarray:  # fmt: skip
+        """One image. vertices: (B, V, 3) posed bodies from `vertices`; goal: (3,) or (G, 3); trail: (T, 3) or a
+        list of such paths.
 
-        goal_shape "ring": a ring of `goal_radius` on the ground under the goal; "sphere": a floating sphere of
-        `goal_radius` at the goal, with a ring of the same radius on the ground below it as a height cue."""
+        goal_shape "ring": a ring of `goal_radius` on the ground under each goal; "sphere": a floating sphere of
+        `goal_radius` at each goal, with a ring of the same radius on the ground below it as a height cue."""
         if goal_shape not in ("ring", "sphere"):
             raise ValueError(f"goal_shape must be 'ring' or 'sphere', got {goal_shape!r}")
+        goals = np.zeros((0, 3)) if goal is None else np.asarray(goal, dtype=np.float64).reshape(-1, 3)
         directions = camera.ray_directions()  # (H, W, 3) float32, cached per camera orientation
-        image, depth = self._background(directions, camera, vertices, goal, goal_radius)
+        image, depth = self._background(directions, camera, vertices, goals, goal_radius)
         if self.scene is not None:
             self.scene.draw(image, depth, camera, directions)
         self._draw_bodies(image, depth, vertices, camera, directions)
-        if goal is not None and goal_shape == "sphere":
-            _draw_sphere(image, depth, camera, directions, np.asarray(goal, dtype=np.float64), goal_radius)
-        if trail is not None and len(trail) > 1:
-            _draw_trail(image, depth, camera, trail)
+        if goal_shape == "sphere":
+            for centre in goals:
+                _draw_sphere(image, depth, camera, directions, centre, goal_radius)
+        paths = [] if trail is None else [trail] if isinstance(trail, np.ndarray) and trail.ndim == 2 else list(trail)
+        for path in paths:
+            if len(path) > 1:
+                _draw_trail(image, depth, camera, np.asarray(path))
         return (np.clip(image, 0.0, 1.0) * 255).astype(np.uint8)
 
-    def _background(self, directions: np.ndarray, camera: Camera, vertices: np.ndarray, goal: np.ndarray | None,
+    def _background(self, directions: np.ndarray, camera: Camera, vertices: np.ndarray, goals: np.ndarray,
                     goal_radius: float) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
-        """Sky gradient and the analytic ground: grid, goal ring, contact shadows. Image (H, W, 3) float32 and
-        depth (H, W) float32 (distance along each ray; inf for sky)."""
+        """Sky gradient and the analytic ground: grid, goal rings (goals: (G, 3)), contact shadows. Image (H, W, 3)
+        float32 and depth (H, W) float32 (distance along each ray; inf for sky)."""
         forward, right, _ = camera.axes()
         view = _ground_view(camera.width, camera.height, camera.fov, tuple(np.round(forward, 9)),
                             tuple(np.round(right, 9)), round(float(camera.eye[2]), 6))  # fmt: skip
@@ -108,8 +113,8 @@ class ThirdPersonRenderer:
         points = view.offsets + camera.eye[:2].astype(np.float32)  # (R, W, 2) ground hits
         line = (np.abs(points - np.round(points)) < view.line_width[..., None]).any(-1)
         ground = np.where(line[..., None], view.line_colour, view.plain_colour)
-        if goal is not None:
-            window = _ground_window(camera, view.first, np.asarray(goal[:2], dtype=np.float64), goal_radius)
+        for goal in goals:
+            window = _ground_window(camera, view.first, goal[:2], goal_radius)
             if window is not None:
                 rows, columns = window
                 to_goal = np.hypot(points[rows, columns, 0] - goal[0], points[rows, columns, 1] - goal[1])

@@ -76,11 +76,48 @@ def _bench_gamma_realism(args: argparse.Namespace) -> int:
 def _play(args: argparse.Namespace) -> int:
     from motion_envs.play import play
 
-    for summary in play(args.env_id, args.policy, args.baseline, args.video, args.seed, args.episodes, args.every, args.search):
+    for summary in play(args.env_id, args.policy, args.baseline, args.video, args.seed, args.episodes, args.every, args.search,
+                        args.save_rollout):  # fmt: skip
         print(" ".join(f"{name}={value}" for name, value in summary.items()))
     if args.video:
         print(f"video: {args.video}")
+    if args.save_rollout:
+        print(f"rollout: {args.save_rollout} (motion-envs view {args.save_rollout})")
     return 0
+
+
+def _view(args: argparse.Namespace) -> int:
+    from motion_envs.play import LiveEpisodes
+    from motion_envs.rollout import Rollout
+    from motion_envs.viewer import RolloutViewer
+
+    if (args.rollout is None) == (args.env is None):
+        print("motion-envs view: give a rollout file or --env (live), not both", file=sys.stderr)
+        return 2
+    scene = _scene_argument(args.scene, args.scene_file)
+    live = LiveEpisodes(args.env, args.policy, args.baseline, args.seed) if args.env else None
+    rollout = Rollout.load(args.rollout) if args.rollout else live.more()
+    viewer = RolloutViewer(rollout, scene, host=args.host, port=args.port, extend=None if live is None else live.more)
+    print(f"viewer on http://{args.host}:{args.port} (Ctrl-C to stop)")
+    try:
+        viewer.run(args.duration)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        viewer.stop()
+    return 0
+
+
+def _scene_argument(spec: str | None, path: Path | None):
+    """A scene from 'family:seed' or a file (None when neither is given)."""
+    from motion_envs.scenes import load_scene, make_scene
+
+    if path is not None:
+        return load_scene(path)
+    if spec is None:
+        return None
+    family, _, seed = spec.partition(":")
+    return make_scene(family, int(seed or 0))
 
 
 def _train_ppo(args: argparse.Namespace) -> int:
@@ -255,7 +292,7 @@ def _add_data_args(parser: argparse.ArgumentParser, default_subsets: list[str] |
 
 def parser() -> argparse.ArgumentParser:
     root = argparse.ArgumentParser(prog="motion-envs", description="Motion-prior Gymnasium environments.")
-    commands = root.add_subparsers(dest="command", required=True, metavar="{data,train,bench,play}")
+    commands = root.add_subparsers(dest="command", required=True, metavar="{data,train,bench,play,view}")
 
     data = commands.add_parser("data", help="build the motion cache from a mocap folder").add_subparsers(
         dest="action", required=True
@@ -347,7 +384,21 @@ def parser() -> argparse.ArgumentParser:
     play.add_argument("--episodes", type=int, default=1)
     play.add_argument("--every", type=int, default=2, help="keep every n-th frame in the video (40 fps / n)")
     play.add_argument("--search", type=int, default=None, metavar="K", help="play a tree search's branch (K kept per level)")
+    play.add_argument("--save-rollout", type=Path, default=None, help="write every frame to an .npz for `motion-envs view`")
     play.set_defaults(run=_play)
+
+    view = commands.add_parser("view", help="browser viewer (viser): replay a rollout file or run a policy live")
+    view.add_argument("rollout", nargs="?", type=Path, default=None, help="an .npz from `motion-envs play --save-rollout`")
+    view.add_argument("--env", default=None, help="run this env live instead (GammaReach-v0 or WandrReach-v0 id)")
+    view.add_argument("--policy", type=Path, default=None, help="live: a saved PPOKL policy (.zip)")
+    view.add_argument("--baseline", default=None, help="live: a baseline name (as `play`)")
+    view.add_argument("--seed", type=int, default=0)
+    view.add_argument("--scene", default=None, metavar="FAMILY:SEED", help="show a procedural room, e.g. living:3")
+    view.add_argument("--scene-file", type=Path, default=None, help="show a scene file (any trimesh format)")
+    view.add_argument("--host", default="127.0.0.1", help="bind address (default 127.0.0.1: this machine only)")
+    view.add_argument("--port", type=int, default=8080)
+    view.add_argument("--duration", type=float, default=None, help="stop after this many seconds (default: until Ctrl-C)")
+    view.set_defaults(run=_view)
     return root
 
 

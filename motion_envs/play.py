@@ -6,6 +6,9 @@ keeps every other frame). The summary line per episode: success, steps,
 final distance, contact score (GAMMA Eq. 11) and foot skating (WANDR's, 0.2 m/s).
 `--search K` plays the branch a tree search (16 roots, 4 children, K kept;
 `motion_envs.wrappers.tree_search`) found with the controller as proposal.
+`--save-rollout out.npz` keeps every generated frame of every episode for
+`motion-envs view` (`motion_envs.rollout`); `LiveEpisodes` feeds the viewer
+live.
 WandrReach-v0 episodes (30 fps) use a saved policy or WANDR's own sampler
 (`--baseline sampler`, the default there) and report success, frames, the
 final and closest wrist distance and foot skating.
@@ -27,9 +30,10 @@ from motion_envs.metrics import foot_skating, skating_threshold
 from motion_envs.priors.canonical import PELVIS
 from motion_envs.render.camera import follow_camera
 from motion_envs.render.third_person import ThirdPersonRenderer
+from motion_envs.rollout import Rollout, RolloutRecorder
 
 BASELINES = ("random", "greedy-reward", "greedy-distance")
-WANDR_ID = "motion_envs/WandrReach-v0"
+GAMMA_ID, WANDR_ID = "motion_envs/GammaReach-v0", "motion_envs/WandrReach-v0"
 
 
 def controller_for(policy: Path | None, baseline: str | None, seed: int) -> Callable:
@@ -49,33 +53,79 @@ def controller_for(policy: Path | None, baseline: str | None, seed: int) -> Call
 
 
 def play(env_id: str, policy: Path | None = None, baseline: str | None = None, video: Path | None = None,
-         seed: int = 0, episodes: int = 1, every: int = 2, search: int | None = None, **env_kwargs) -> list[dict]:  # fmt: skip
-    """Run `episodes` episodes; returns their summaries (and writes `video` when given). `env_kwargs` go to the env;
-    `search` (K kept per level) plays tree-search branches instead of the controller's own latents."""
+         seed: int = 0, episodes: int = 1, every: int = 2, search: int | None = None, save_rollout: Path | None = None,
+         **env_kwargs) -> list[dict]:  # fmt: skip
+    """Run `episodes` episodes; returns their summaries (and writes `video` and `save_rollout` when given).
+    `env_kwargs` go to the env; `search` (K kept per level) plays tree-search branches instead of the
+    controller's own latents."""
     if every < 1:
         raise ValueError(f"every must be >= 1, got {every}")
     if env_id == WANDR_ID:
         if search is not None:
             raise ValueError(f"--search needs a primitive-level env (GammaReach-v0), not {WANDR_ID}")
-        return _play_wandr(policy, baseline, video, seed, episodes, every, **env_kwargs)
-    if env_id != "motion_envs/GammaReach-v0":
-        raise ValueError(f"play supports motion_envs/GammaReach-v0 and {WANDR_ID}, got {env_id!r}")
-    env = GammaReachEnv(**env_kwargs)
-    controller = controller_for(policy, baseline, seed)
-    renderer = ThirdPersonRenderer(env.core.generator.body) if video else None
-    writer = imageio.get_writer(str(video), fps=GAMMA_FPS / every, macro_block_size=8) if video else None
+        env = _wandr_env(video is not None, env_kwargs)
+        controller = wandr_controller(policy, baseline, seed)
+        fps, run = env.metadata["render_fps"], _wandr_episode
+    elif env_id == GAMMA_ID:
+        env = GammaReachEnv(**env_kwargs)
+        controller = controller_for(policy, baseline, seed)
+        fps, run = GAMMA_FPS, _episode
+    else:
+        raise ValueError(f"play supports {GAMMA_ID} and {WANDR_ID}, got {env_id!r}")
+    recorder = RolloutRecorder(fps, *env.core.goal_marker, env_id=env_id) if save_rollout else None
+    writer = imageio.get_writer(str(video), fps=fps / every, macro_block_size=8) if video else None
     summaries = []
     try:
         for episode in range(episodes):
-            summaries.append(_episode(env, controller, renderer, writer, seed + episode, every, search))
+            summaries.append(run(env, controller, writer, seed + episode, every, search, recorder))
     finally:
         if writer is not None:
             writer.close()
+    if recorder is not None:
+        recorder.rollout().save(save_rollout)
     return summaries
 
 
-def _episode(env: GammaReachEnv, controller: Callable, renderer: ThirdPersonRenderer | None, writer, seed: int,
-             every: int, search: int | None) -> dict:  # fmt: skip
+class LiveEpisodes:
+    """Episodes played on demand for the live viewer: `more()` returns the frames of the next steps (about
+    one second of motion), starting a new episode (next seed) when one ends."""
+
+    def __init__(self, env_id: str, policy: Path | None = None, baseline: str | None = None, seed: int = 0) -> None:
+        if env_id not in (GAMMA_ID, WANDR_ID):
+            raise ValueError(f"the live viewer supports {GAMMA_ID} and {WANDR_ID}, got {env_id!r}")
+        self.env_id, self.seed = env_id, seed
+        wandr = env_id == WANDR_ID
+        self.env = _wandr_env(False, {}) if wandr else GammaReachEnv()
+        self.controller = wandr_controller(policy, baseline, seed) if wandr else controller_for(policy, baseline, seed)
+        self.fps = self.env.metadata["render_fps"] if wandr else GAMMA_FPS
+        self.env.reset(seed=seed)
+        self.done = False
+
+    def more(self) -> Rollout:
+        recorder = RolloutRecorder(self.fps, *self.env.core.goal_marker, env_id=self.env_id)
+        while len(recorder) < self.fps:
+            if self.done:
+                self.seed += 1
+                self.env.reset(seed=self.seed)
+            _, _, terminated, truncated, _ = self.env.step(self.controller(self.env.core, self.env.state)[0].numpy())
+            _record_step(self.env, recorder)
+            self.done = terminated or truncated
+        return recorder.rollout()
+
+
+def _record_step(env, recorder: RolloutRecorder) -> None:
+    """Add the frames the env's last step generated (GammaReach: a primitive's new frames; WandrReach: one)."""
+    if isinstance(env, GammaReachEnv):
+        primitive, goal = env.last_primitive, env.state.goal[:1]
+        for frame in torch.nonzero(primitive.new_frames()[0]).flatten().tolist():
+            recorder.add(primitive.transl[:1, frame], primitive.global_orient[:1, frame], primitive.body_pose[:1, frame], goal)
+        return
+    inputs = env.core.render_inputs(env.state)
+    recorder.add(inputs.transl, inputs.global_orient, inputs.body_pose, inputs.goal)
+
+
+def _episode(env: GammaReachEnv, controller: Callable, writer, seed: int, every: int, search: int | None,
+             recorder: RolloutRecorder | None) -> dict:  # fmt: skip
     env.reset(seed=seed)
     plan = None
     if search is not None:
@@ -83,6 +133,7 @@ def _episode(env: GammaReachEnv, controller: Callable, renderer: ThirdPersonRend
 
         plan = beam_search(env.core, env.state, controller, SearchSettings(keep=search)).latents[0]
     body, feet_ids = env.core.generator.body, foot_vertex_ids()
+    renderer = ThirdPersonRenderer(env.core.body) if writer is not None else None
     feet, contact, trail = [], [], [env.trail[0]]
     info: dict = {}
     steps = 0
@@ -95,6 +146,8 @@ def _episode(env: GammaReachEnv, controller: Callable, renderer: ThirdPersonRend
         with torch.no_grad():
             feet.append(body.skin(body(transl, orient, pose), feet_ids))
         contact.append(info["contact_score"])
+        if recorder is not None:
+            _record_step(env, recorder)
         if renderer is not None:
             pelvis = primitive.joints[0, new, PELVIS].numpy()
             vertices = renderer.vertices(transl, orient, pose)
@@ -117,36 +170,37 @@ def _episode(env: GammaReachEnv, controller: Callable, renderer: ThirdPersonRend
     }
 
 
-def _play_wandr(policy: Path | None, baseline: str | None, video: Path | None, seed: int, episodes: int, every: int,
-                **env_kwargs) -> list[dict]:  # fmt: skip
-    """WandrReach episodes rendered frame by frame (`env.render()`, the prior's 30 fps / `every`)."""
-    from baselines.wandr_sampler import WandrSampler
-    from motion_envs.envs.wandr_reach import WandrReachEnv
-
+def wandr_controller(policy: Path | None, baseline: str | None, seed: int) -> Callable:
+    """A saved policy, or WANDR's own sampler (the default and only baseline there)."""
     if baseline not in (None, "sampler"):
         raise ValueError(f"unknown baseline {baseline!r} for {WANDR_ID}; choose from ('sampler',)")
     if policy is not None:
         from agents.controllers import PolicyLatent
 
-        controller = PolicyLatent(policy, seed=seed)
-    else:
-        controller = WandrSampler(seed=seed)
-    env = WandrReachEnv(render_mode="rgb_array" if video else None, **env_kwargs)
-    writer = imageio.get_writer(str(video), fps=env.metadata["render_fps"] / every, macro_block_size=8) if video else None
-    summaries = []
-    try:
-        for episode in range(episodes):
-            env.reset(seed=seed + episode)
-            for step in range(env.config.max_steps):
-                _, _, terminated, truncated, info = env.step(controller(env.core, env.state)[0].numpy())
-                if writer is not None and step % every == 0:
-                    writer.append_data(env.render())
-                if terminated or truncated:
-                    break
-            summaries.append({"seed": seed + episode, "success": bool(info["is_success"]), "frames": info["frames"],
-                              "final_distance": round(info["distance"], 3), "closest": round(info["closest_distance"], 3),
-                              "foot_skating": round(info["foot_skating"], 3)})  # fmt: skip
-    finally:
-        if writer is not None:
-            writer.close()
-    return summaries
+        return PolicyLatent(policy, seed=seed)
+    from baselines.wandr_sampler import WandrSampler
+
+    return WandrSampler(seed=seed)
+
+
+def _wandr_env(rendered: bool, env_kwargs: dict):
+    from motion_envs.envs.wandr_reach import WandrReachEnv
+
+    return WandrReachEnv(render_mode="rgb_array" if rendered else None, **env_kwargs)
+
+
+def _wandr_episode(env, controller: Callable, writer, seed: int, every: int, search: int | None,
+                   recorder: RolloutRecorder | None) -> dict:  # fmt: skip
+    """A WandrReach episode rendered frame by frame (`env.render()`, the prior's 30 fps / `every`)."""
+    env.reset(seed=seed)
+    for step in range(env.config.max_steps):
+        _, _, terminated, truncated, info = env.step(controller(env.core, env.state)[0].numpy())
+        if recorder is not None:
+            _record_step(env, recorder)
+        if writer is not None and step % every == 0:
+            writer.append_data(env.render())
+        if terminated or truncated:
+            break
+    return {"seed": seed, "success": bool(info["is_success"]), "frames": info["frames"],
+            "final_distance": round(info["distance"], 3), "closest": round(info["closest_distance"], 3),
+            "foot_skating": round(info["foot_skating"], 3)}  # fmt: skip

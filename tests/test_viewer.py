@@ -1,0 +1,95 @@
+"""Rollout files, the mannequin-x pose mapping, and the browser viewer opened for real in headless Chromium."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import socket
+import threading
+
+import imageio.v3 as iio
+import numpy as np
+import pytest
+import torch
+
+from motion_envs.rollout import Rollout, RolloutRecorder
+
+
+def test_rollout_files_round_trip_and_bad_files_fail_clearly(tmp_path):
+    recorder = RolloutRecorder(30.0, "sphere", 0.1, env_id="motion_envs/WandrReach-v0")
+    rotations = torch.randn(4, 22, 3) * 0.3
+    for frame in range(4):
+        recorder.add(torch.full((2, 3), float(frame)), rotations[frame : frame + 1, 0].expand(2, 3),
+                     rotations[frame : frame + 1, 1:].expand(2, 21, 3), torch.ones(2, 3))  # fmt: skip
+    rollout = recorder.rollout()
+    assert (rollout.frames, rollout.bodies) == (4, 2) and len(recorder) == 4
+    loaded = Rollout.load(rollout.save(tmp_path / "r.npz"))
+    np.testing.assert_allclose(loaded.rotations[:, 1], rotations.numpy(), atol=1e-5)
+    assert (loaded.fps, loaded.goal_shape, loaded.goal_radius, loaded.env_id) == (30.0, "sphere", 0.1, "motion_envs/WandrReach-v0")
+    np.savez(tmp_path / "other.npz", transl=np.zeros((2, 1, 3)))
+    with pytest.raises(ValueError, match="missing"):
+        Rollout.load(tmp_path / "other.npz")
+    (tmp_path / "junk.npz").write_bytes(b"not a zip")
+    with pytest.raises(ValueError, match="junk.npz"):
+        Rollout.load(tmp_path / "junk.npz")
+    with pytest.raises(ValueError, match="rotations"):
+        Rollout(np.zeros((3, 1, 3)), np.zeros((3, 1, 21, 3)), np.zeros((3, 1, 3)), fps=30.0)
+
+
+def test_mannequin_pose_puts_every_joint_where_our_body_does(body):
+    import mannequin
+
+    from motion_envs.viewer import mannequin_pose
+
+    model = mannequin.Mannequin("wooden")
+    template = model.rest_pose()
+    offset = np.asarray(model.joint_transforms(mannequin_pose(template, np.zeros(3), np.zeros((22, 3)), np.zeros(3))))[0, :3, 3]
+    generator = torch.Generator().manual_seed(0)
+    transl, rotations = torch.randn(3, generator=generator), torch.randn(22, 3, generator=generator) * 0.5
+    ours = body(transl[None], rotations[None, 0], rotations[None, 1:]).joints[0].numpy()
+    theirs = np.asarray(model.joint_transforms(mannequin_pose(template, transl.numpy(), rotations.numpy(), offset)))[:22, :3, 3]
+    np.testing.assert_allclose(theirs, ours, atol=1e-5)
+
+
+def _free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+def test_browser_viewer_replays_a_rollout_with_the_body_on_the_canvas(tmp_path):
+    chromium = shutil.which("chromium") or shutil.which("chromium-browser")
+    if chromium is None:
+        message = "headless Chromium not found (Debian package `chromium`; .ci/run installs it)"
+        if os.environ.get("CI", "").lower() == "true":
+            pytest.fail(message)
+        pytest.skip(message)
+    from playwright.sync_api import sync_playwright
+
+    from motion_envs.play import play
+    from motion_envs.viewer import RolloutViewer
+
+    path = tmp_path / "episode.npz"
+    play("motion_envs/WandrReach-v0", seed=3, save_rollout=path, max_frames=45)
+    rollout = Rollout.load(path)
+    viewer = RolloutViewer(rollout, port=_free_port())
+    port = viewer.server.get_port()
+    player = threading.Thread(target=viewer.run, kwargs={"duration": 30.0}, daemon=True)
+    player.start()
+    try:
+        with sync_playwright() as playwright:
+            browser = playwright.chromium.launch(executable_path=chromium, args=["--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--no-sandbox"])
+            page = browser.new_page(viewport={"width": 640, "height": 480})
+            page.goto(f"http://127.0.0.1:{port}")
+            page.wait_for_selector("canvas", timeout=60_000)
+            page.wait_for_timeout(5_000)
+            page.screenshot(path=str(tmp_path / "viewer.png"))
+            browser.close()
+        assert int(viewer.slider.value) > 0  # the timeline played
+    finally:
+        viewer.stop()
+        player.join(timeout=5)
+    pixels = iio.imread(tmp_path / "viewer.png")[..., :3].reshape(-1, 3).astype(int)
+    assert pixels.std(axis=0).mean() > 5  # not a blank canvas
+    wood = (pixels[:, 0] > pixels[:, 2] + 60) & (pixels[:, 0] > pixels[:, 1] + 20)  # mannequin-x's wood palette
+    assert wood.sum() > 200

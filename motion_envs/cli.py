@@ -364,7 +364,7 @@ def parser() -> argparse.ArgumentParser:
     bench.add_parser("speed", help="GAMMA rollout body-primitives/s by batch, fp32 and bf16 (throughput.md)").set_defaults(
         run=_bench_speed
     )
-    bench.add_parser("render", help="third-person rendering frames/s (benchmarks/results/throughput.md)").set_defaults(
+    bench.add_parser("render", help="third-person and egocentric rendering frames/s (benchmarks/results/throughput.md)").set_defaults(
         run=_bench_render
     )
     realism = bench.add_parser("gamma-realism", help="random-latent GAMMA motion vs the data: contact score, FS")

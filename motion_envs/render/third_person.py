@@ -46,10 +46,11 @@ class BodyMesh:
 
 
 @lru_cache(maxsize=4)
-def body_mesh(cell: float = 0.025) -> BodyMesh:
+def body_mesh(cell: float = 0.035) -> BodyMesh:
     """Vertex clustering at `cell` metres: every rest vertex snaps to one kept vertex of its grid cell,
-    collapsed triangles go. 0.025 m keeps 4.0k of 24k vertices and 9.8k of 48k faces (0.015 m: 22k faces);
-    embree's build of the posed mesh, every frame, costs time in proportion to the faces."""
+    collapsed triangles go. 0.035 m keeps 2.1k of 24k vertices and 5.3k of 48k faces (0.015 m: 22k faces),
+    which at 480 × 360 looks the same as 0.025 m (9.8k faces); handing the posed mesh to embree every frame
+    (embreex copies it element by element) costs time in proportion to its size."""
     rest = rest_body()
     cells = np.floor(rest.vertices / cell).astype(np.int64)
     _, kept, cell_of_vertex = np.unique(cells, axis=0, return_index=True, return_inverse=True)
@@ -62,7 +63,7 @@ def body_mesh(cell: float = 0.025) -> BodyMesh:
 class ThirdPersonRenderer:
     """Renders posed bodies with their goal and trail, optionally in a scene, as (H, W, 3) uint8 images."""
 
-    def __init__(self, body: BodyModel | None = None, width: int = 480, height: int = 360, lod_cell: float = 0.025,
+    def __init__(self, body: BodyModel | None = None, width: int = 480, height: int = 360, lod_cell: float = 0.035,
                  scene: Scene | None = None, cutaway_height: float = 1.2) -> None:  # fmt: skip
         self.body = body or BodyModel()
         self.width, self.height = width, height
@@ -116,11 +117,11 @@ class ThirdPersonRenderer:
         for goal in goals:
             window = _ground_window(camera, view.first, goal[:2], goal_radius)
             if window is not None:
-                rows, columns = window
-                to_goal = np.hypot(points[rows, columns, 0] - goal[0], points[rows, columns, 1] - goal[1])
-                inside = to_goal < goal_radius
-                rows, columns, to_goal = rows[inside], columns[inside], to_goal[inside]
-                ground[rows, columns] = np.where((to_goal > goal_radius * 0.85)[:, None], GOAL, 0.6 * ground[rows, columns] + 0.4 * GOAL)
+                to_goal = np.hypot(points[window][..., 0] - goal[0], points[window][..., 1] - goal[1])
+                patch = ground[window]  # a view: painting it paints the ground
+                inside, rim = to_goal < goal_radius, to_goal > goal_radius * 0.85
+                patch[inside & ~rim] = 0.6 * patch[inside & ~rim] + 0.4 * GOAL
+                patch[inside & rim] = GOAL
         for body in vertices:  # a handful of bodies per image
             _shade_shadow(ground, points, camera, view.first, body)
         image[view.first :] = ground
@@ -134,17 +135,13 @@ class ThirdPersonRenderer:
         window = _pixel_window(camera, flat)
         if window is None:
             return
-        rows, columns = window
-        rays = directions[rows, columns]
+        rays = directions[window].reshape(-1, 3)
         faces = (self.mesh.faces[None] + (np.arange(bodies) * count)[:, None, None]).reshape(-1, 3)
         triangle, distance = RayCaster(flat, faces).cast(np.broadcast_to(camera.eye, rays.shape), rays)
-        front = distance < depth[rows, columns]
-        if not front.any():
-            return
-        rows, columns, triangle = rows[front], columns[front], triangle[front]
-        depth[rows, columns] = distance[front]
-        image[rows, columns] = WOOD * _lambert(flat[faces[triangle]], rays[front])[:, None]
-
+        front = distance < depth[window].reshape(-1)
+        if front.any():
+            shade = _lambert(flat[faces[triangle[front]]], rays[front])
+            _paint(image, depth, window, front, WOOD * shade[:, None], distance[front])
 
 class _CutawayScene:
     """A scene's walls and furniture with every vertex lowered to at most `height` (boxes stay boxes, other
@@ -171,21 +168,23 @@ shapes flatten at the cut; floors are drawn as the analytic ground), ready to ca
         where the scene is nearest, each face lit from the side the camera sees."""
         corners = np.array([[x, y, z] for x in self.bounds[:, 0] for y in self.bounds[:, 1] for z in self.bounds[:, 2]])
         inside = np.all((camera.eye >= self.bounds[0]) & (camera.eye <= self.bounds[1]))
-        if inside or not camera.project(corners)[1].all():
-            rows, columns = np.indices((camera.height, camera.width)).reshape(2, -1)
-        else:
-            window = _pixel_window(camera, corners)
-            if window is None:
-                return
-            rows, columns = window
-        rays = directions[rows, columns]
+        window = (slice(None), slice(None)) if inside or not camera.project(corners)[1].all() else _pixel_window(camera, corners)
+        if window is None:
+            return
+        rays = directions[window].reshape(-1, 3)
         triangle, distance = self.caster.cast(np.broadcast_to(camera.eye, rays.shape), rays)
-        front = distance < depth[rows, columns]
-        rows, columns, triangle, rays = rows[front], columns[front], triangle[front], rays[front]
-        depth[rows, columns] = distance[front]
-        back = (np.einsum("rk,rk->r", self.normals[triangle], rays) > 0).astype(np.int64)
-        image[rows, columns] = self.shaded[back, triangle]
+        front = distance < depth[window].reshape(-1)
+        triangle = triangle[front]
+        back = (np.einsum("rk,rk->r", self.normals[triangle], rays[front]) > 0).astype(np.int64)
+        _paint(image, depth, window, front, self.shaded[back, triangle], distance[front])
 
+
+def _paint(image: np.ndarray, depth: np.ndarray, window: tuple[slice, slice], front: np.ndarray, colours: np.ndarray,
+           distance: np.ndarray) -> None:  # fmt: skip
+    """Write `colours` (K, 3) and `distance` (K,) into the window's pixels where the flat mask `front` is set."""
+    mask = front.reshape(depth[window].shape)
+    image[window][mask] = colours
+    depth[window][mask] = distance
 
 @dataclass(frozen=True)
 class _GroundView:
@@ -221,16 +220,15 @@ def _ground_view(width: int, height: int, fov: float, forward: tuple, right: tup
     return _GroundView(sky, depth, first, offsets, line_width, faded[0], faded[1])
 
 
-def _ground_window(camera: Camera, first: int, centre: np.ndarray, half: float) -> tuple[np.ndarray, np.ndarray] | None:
-    """(rows, columns) into the ground rows of the pixels whose screen box covers the ground square of
+def _ground_window(camera: Camera, first: int, centre: np.ndarray, half: float) -> tuple[slice, slice] | None:
+    """Window into the ground rows (rows counted from `first`) covering the screen box of the ground square of
     half-size `half` around `centre` (2,)."""
     corners = np.array([[centre[0] + dx * half, centre[1] + dy * half, 0.0] for dx in (-1, 1) for dy in (-1, 1)])
     window = _pixel_window(camera, corners)
-    if window is None:
+    if window is None or window[0].stop <= first:
         return None
     rows, columns = window
-    keep = rows >= first
-    return rows[keep] - first, columns[keep]
+    return slice(max(rows.start, first) - first, rows.stop - first), columns
 
 
 def _shade_shadow(ground: np.ndarray, points: np.ndarray, camera: Camera, first: int, body: np.ndarray) -> None:
@@ -240,19 +238,17 @@ def _shade_shadow(ground: np.ndarray, points: np.ndarray, camera: Camera, first:
     window = _ground_window(camera, first, centre, 1.0)
     if window is None:
         return
-    rows, columns = window
-    local = points[rows, columns]
-    near = np.nonzero(np.abs(local - centre).max(axis=-1) < 1.0)[0]
-    rows, columns, local = rows[near], columns[near], local[near]
-    factor = 1.0 - 0.25 * np.exp(-np.sum((local - centre) ** 2, axis=-1) / (2 * 0.25**2))
+    local = points[window]  # (r, w, 2)
+    factor = np.ones(local.shape[:2], dtype=np.float32)
+    near = np.abs(local - centre).max(axis=-1) < 1.0
+    factor[near] -= 0.25 * np.exp(-np.sum((local[near] - centre) ** 2, axis=-1) / (2 * 0.25**2))
     low = body[body[:, 2] < 0.03, :2]  # vertices within 3 cm of the ground
     if len(low):
         contacts = low[:: max(1, len(low) // 24)]
-        close = np.nonzero(((local >= contacts.min(axis=0) - 0.2) & (local <= contacts.max(axis=0) + 0.2)).all(axis=-1))[0]
-        squared = np.sum((local[close, None, :] - contacts[None]) ** 2, axis=-1)
+        close = ((local >= contacts.min(axis=0) - 0.2) & (local <= contacts.max(axis=0) + 0.2)).all(axis=-1)
+        squared = np.sum((local[close][:, None, :] - contacts[None]) ** 2, axis=-1)
         factor[close] *= np.prod(1.0 - 0.5 * np.exp(-squared / (2 * 0.05**2)), axis=1)
-    ground[rows, columns] *= factor[:, None].astype(np.float32)
-
+    ground[window] *= factor[..., None]
 
 def _lambert(triangles: np.ndarray, rays: np.ndarray) -> np.ndarray:
     """Shade (R,) of hit triangles (R, 3, 3) seen along `rays` (R, 3), on the side the rays see."""
@@ -267,19 +263,18 @@ def _shade(normals: np.ndarray) -> np.ndarray:
     return 0.35 + 0.65 * np.clip(normals @ LIGHT, 0.0, None)
 
 
-def _pixel_window(camera: Camera, points: np.ndarray, pad: int = 2) -> tuple[np.ndarray, np.ndarray] | None:
-    """Flat (rows, columns) of the pixels in the screen box of `points` (P, 3), or None when it is empty."""
+def _pixel_window(camera: Camera, points: np.ndarray, pad: int = 2) -> tuple[slice, slice] | None:
+    """(rows, columns) slices of the screen box of `points` (P, 3) in front of the camera, or None when empty."""
     pixels, in_front = camera.project(points)
     if not in_front.any():
         return None
     low = np.floor(pixels[in_front].min(axis=0)).astype(int) - pad
     high = np.ceil(pixels[in_front].max(axis=0)).astype(int) + pad
-    row_range = np.arange(max(low[0], 0), min(high[0], camera.height))
-    column_range = np.arange(max(low[1], 0), min(high[1], camera.width))
-    if len(row_range) == 0 or len(column_range) == 0:
+    rows = slice(max(int(low[0]), 0), min(int(high[0]), camera.height))
+    columns = slice(max(int(low[1]), 0), min(int(high[1]), camera.width))
+    if rows.start >= rows.stop or columns.start >= columns.stop:
         return None
-    rows, columns = np.meshgrid(row_range, column_range, indexing="ij")
-    return rows.reshape(-1), columns.reshape(-1)
+    return rows, columns
 
 
 def _draw_sphere(image: np.ndarray, depth: np.ndarray, camera: Camera, directions: np.ndarray, centre: np.ndarray,
@@ -289,18 +284,15 @@ def _draw_sphere(image: np.ndarray, depth: np.ndarray, camera: Camera, direction
     window = _pixel_window(camera, centre + offsets)
     if window is None:
         return
-    rows, columns = window
-    rays = directions[rows, columns].astype(np.float64)
+    rays = directions[window].reshape(-1, 3).astype(np.float64)
     to_centre = centre - camera.eye
     along = rays @ to_centre
     miss = to_centre @ to_centre - along**2
     entry = along - np.sqrt(np.clip(radius**2 - miss, 0.0, None))
-    hit = (miss <= radius**2) & (entry > 0) & (entry < depth[rows, columns])
-    if not hit.any():
-        return
-    normals = (camera.eye + entry[hit, None] * rays[hit] - centre) / radius
-    image[rows[hit], columns[hit]] = GOAL * (0.45 + 0.55 * np.clip(normals @ LIGHT, 0.0, None))[:, None]
-    depth[rows[hit], columns[hit]] = entry[hit]
+    hit = (miss <= radius**2) & (entry > 0) & (entry < depth[window].reshape(-1))
+    if hit.any():
+        normals = (camera.eye + entry[hit, None] * rays[hit] - centre) / radius
+        _paint(image, depth, window, hit, GOAL * (0.45 + 0.55 * np.clip(normals @ LIGHT, 0.0, None))[:, None], entry[hit])
 
 
 def _draw_trail(image: np.ndarray, depth: np.ndarray, camera: Camera, trail: np.ndarray) -> None:

@@ -59,7 +59,7 @@ class BatchedState:
             if isinstance(mine, BatchedState):
                 changes[field.name] = mine.replace_bodies(mask, theirs)
             else:
-                changes[field.name] = torch.where(mask.reshape(-1, *([1] * (mine.ndim - 1))), theirs, mine)
+                changes[field.name] = where_bodies(mask, theirs, mine)
         return dataclasses.replace(self, **changes)
 
     @classmethod
@@ -70,3 +70,8 @@ class BatchedState:
             values = [getattr(state, field.name) for state in states]
             changes[field.name] = type(values[0]).cat(values) if isinstance(values[0], BatchedState) else torch.cat(values)
         return cls(**changes)
+
+
+def where_bodies(mask: torch.Tensor, new: torch.Tensor, old: torch.Tensor) -> torch.Tensor:
+    """`new` for the bodies where `mask` (N,) holds, else `old` (both (N, ...))."""
+    return torch.where(mask.reshape(-1, *([1] * (new.ndim - 1))), new, old)

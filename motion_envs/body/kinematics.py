@@ -142,6 +142,23 @@ class BodyModel(nn.Module):
         size = int(np.prod(batch)) if batch else 1
         root = self._root_transposed(global_orient.reshape(size, global_orient.shape[-1]))
         local = self._local_transposed(body_pose.reshape(size, NUM_BODY_POSE_JOINTS, body_pose.shape[-1]))
+        return self._compose(transl, root, local, batch)
+
+    def from_matrices(self, transl: torch.Tensor, orient: torch.Tensor, pose: torch.Tensor) -> BodyPose:
+        """`forward` with rotation matrices: orient (..., 3, 3) pelvis rotations, pose (..., 21, 3, 3) SMPL-X local
+        rotations (no 6-D round trip; what autoregressive priors integrate)."""
+        batch = transl.shape[:-1]
+        if orient.shape != (*batch, 3, 3) or pose.shape != (*batch, NUM_BODY_POSE_JOINTS, 3, 3):
+            raise ValueError(f"need orient {(*batch, 3, 3)} and pose {(*batch, NUM_BODY_POSE_JOINTS, 3, 3)}, "
+                             f"got {tuple(orient.shape)} and {tuple(pose.shape)}")  # fmt: skip
+        size = int(np.prod(batch)) if batch else 1
+        axes = self.axes_to_world.to(pose.dtype)
+        local = (axes @ pose.reshape(size, NUM_BODY_POSE_JOINTS, 3, 3) @ axes.T).transpose(-1, -2)
+        return self._compose(transl, orient.reshape(size, 3, 3).transpose(-1, -2), local, batch)
+
+    def _compose(self, transl: torch.Tensor, root: torch.Tensor, local: torch.Tensor, batch: torch.Size) -> BodyPose:
+        """Forward kinematics from transposed world-axis rotations: root (B, 3, 3), local (B, 21, 3, 3)."""
+        size = root.shape[0]
         levels = [root[:, None]]
         for start, stop, slots in self._levels:
             parents = levels[-1][:, slots] if isinstance(slots, slice) else levels[-1].index_select(1, getattr(self, slots))

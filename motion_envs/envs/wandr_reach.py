@@ -86,18 +86,17 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
-import roma
 import torch
 
-from motion_envs.batched import BatchedState
+from motion_envs.batched import BatchedState, where_bodies
 from motion_envs.body import BodyModel
 from motion_envs.body.rotations import matrix_to_sixd
-from motion_envs.data.start_poses import load_start_poses
 from motion_envs.envs.core import CoreVectorEnv, check_actions, config_from_kwargs
+from motion_envs.envs.starts import StartBodies
 from motion_envs.metrics import WANDR_SKATING_THRESHOLD
 from motion_envs.priors.train_wandr import load_wandr
 from motion_envs.priors.wandr import WandrPrior, WandrStepper
-from motion_envs.priors.wandr_features import FPS, PELVIS, RIGHT_WRIST, WandrState, heading, make_state, pose_delta
+from motion_envs.priors.wandr_features import FPS, PELVIS, RIGHT_WRIST, WandrState, heading
 from motion_envs.render.env_view import EnvView, RenderInputs
 from motion_envs.rewards import WandrRewardConfig, latent_cost, wrist_progress
 
@@ -207,15 +206,11 @@ class WandrReachCore:
         self.prior = (prior or load_wandr(config.weights)).to(self.device).eval()
         self.body = BodyModel().to(self.device)
         self.stepper = WandrStepper(self.prior, self.body, config.ground_feet)
-        starts = load_start_poses(FPS)
-        self.start_transl, self.start_orient, self.start_pose = (
-            torch.as_tensor(starts[name][:, -2:], dtype=torch.float32, device=self.device)
-            for name in ("transl", "global_orient", "body_pose")
-        )  # (S, 2, ...): the frame before the start and the start
+        self.starts = StartBodies(self.stepper, self.device)
 
     @property
     def num_starts(self) -> int:
-        return len(self.start_transl)
+        return len(self.starts)
 
     def initial_state(self, start_index: torch.Tensor, facing: torch.Tensor, goals: torch.Tensor,
                       goal_count: torch.Tensor | None = None, goal_time: torch.Tensor | None = None,
@@ -225,21 +220,9 @@ class WandrReachCore:
         goals: (N, G, 3) world goals (the first G' = goal_count of them used, in order);
         goal_time: (N,) frames each goal gets (-1 / None: until the episode's end); goal_velocity: (N, 3) m/s.
         """
-        start_index, facing, goals = start_index.to(self.device), facing.to(self.device), goals.to(self.device, torch.float32)
-        if (start_index < 0).any() or (start_index >= self.num_starts).any():
-            raise ValueError(f"start_index must lie in [0, {self.num_starts}), got {start_index.tolist()}")
+        goals = goals.to(self.device, torch.float32)
         count = len(start_index)
-        turn = _about_z(facing)
-        origin = self.start_transl[start_index, -1] * torch.tensor([1.0, 1.0, 0.0], device=self.device)
-        transl = ((self.start_transl[start_index] - origin[:, None])[..., None, :] @ turn[:, None].transpose(-1, -2)).squeeze(-2)
-        orient = turn[:, None] @ roma.rotvec_to_rotmat(self.start_orient[start_index])
-        pose = roma.rotvec_to_rotmat(self.start_pose[start_index])
-        delta = pose_delta(transl[:, 0], orient[:, 0], pose[:, 0], transl[:, 1], orient[:, 1], pose[:, 1])
-        _, posed = make_state(self.body, transl[:, 1], orient[:, 1], pose[:, 1], delta)
-        lowest = self.stepper.feet(posed)[..., 2].amin(dim=-1)  # snap the lowest foot point to the ground
-        grounded = transl[:, 1] - torch.stack([torch.zeros_like(lowest), torch.zeros_like(lowest), lowest], -1)
-        body, posed = make_state(self.body, grounded, orient[:, 1], pose[:, 1], delta)
-        feet = self.stepper.feet(posed)
+        body, feet = self.starts.place(start_index, facing)
         lowest_id = feet[..., 2].argmin(dim=-1)
         rows = torch.arange(count, device=self.device)
         goal_count = torch.ones(count, dtype=torch.long, device=self.device) if goal_count is None else goal_count.to(self.device)
@@ -259,8 +242,8 @@ class WandrReachCore:
                        distance: torch.Tensor) -> torch.Tensor:  # fmt: skip
         """(N, 3) goals at `angle` from the body's forward (N,), `height` (N,), ground `distance` (N,) from
         the pelvis, for bodies placed by `initial_state(start_index, facing, ...)` (pelvis over the origin)."""
-        start_index, facing = start_index.to(self.device), facing.to(self.device)
-        forward = heading(_about_z(facing) @ roma.rotvec_to_rotmat(self.start_orient[start_index, -1]))[:, :2, 1]
+        forward = self.starts.forward(start_index, facing)
+        forward = forward / forward.norm(dim=-1, keepdim=True).clamp_min(1e-6)
         cosine, sine = torch.cos(angle.to(self.device)), torch.sin(angle.to(self.device))
         direction = torch.stack([cosine * forward[:, 0] - sine * forward[:, 1], sine * forward[:, 0] + cosine * forward[:, 1]], -1)
         ground = direction * distance.to(self.device)[:, None]
@@ -339,15 +322,15 @@ class WandrReachCore:
             terms["skating"] += skated.float()
             distance_now = (body.joints[:, RIGHT_WRIST] - goals[rows, goal_index]).norm(dim=-1)
             lowest_id = feet[..., 2].argmin(dim=-1)
-            moved = WandrState(*(_where(active, new, old) for new, old in zip(body, state.body)))  # done bodies stay
+            moved = WandrState(*(where_bodies(active, new, old) for new, old in zip(body, state.body)))  # done bodies stay
             state = dataclasses.replace(
                 state, **moved._asdict(), goals=goals, goal_index=goal_index,
                 deadline=torch.where(advance, self._deadline(frame, state.goal_time), state.deadline),
-                frame=_where(active, frame, state.frame),
-                distance=_where(active, distance_now, state.distance),
-                closest=torch.where(advance, distance_now, _where(active, torch.minimum(state.closest, distance_now), state.closest)),
-                lowest_id=_where(active, lowest_id, state.lowest_id),
-                lowest_xy=_where(active, feet[rows, lowest_id, :2], state.lowest_xy),
+                frame=where_bodies(active, frame, state.frame),
+                distance=where_bodies(active, distance_now, state.distance),
+                closest=torch.where(advance, distance_now, where_bodies(active, torch.minimum(state.closest, distance_now), state.closest)),
+                lowest_id=where_bodies(active, lowest_id, state.lowest_id),
+                lowest_xy=where_bodies(active, feet[rows, lowest_id, :2], state.lowest_xy),
                 skated=state.skated + skated.long(), reached=state.reached | (arrived & last),
             )  # fmt: skip
         terms["latent"] = latent_cost(z)
@@ -356,16 +339,6 @@ class WandrReachCore:
         terminated = state.reached if config.terminate_on_success else torch.zeros_like(state.reached)
         truncated = (state.frame >= config.max_frames) & ~terminated
         return state, WandrStepResult(reward, terms, terminated, truncated)
-
-
-def _about_z(angle: torch.Tensor) -> torch.Tensor:
-    """(N,) radians -> (N, 3, 3) rotations about +z."""
-    return roma.rotvec_to_rotmat(torch.stack([torch.zeros_like(angle), torch.zeros_like(angle), angle], -1))
-
-
-def _where(mask: torch.Tensor, new: torch.Tensor, old: torch.Tensor) -> torch.Tensor:
-    """`new` for the bodies where `mask` (N,) holds, else `old` (both (N, ...))."""
-    return torch.where(mask.reshape(-1, *([1] * (new.ndim - 1))), new, old)
 
 
 def _step_info(state: WandrReachState, result: WandrStepResult, index: int) -> dict[str, Any]:

@@ -35,8 +35,10 @@ Reads top to bottom: clips -> windows with hallucinated goals -> statistics
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 import torch
@@ -156,21 +158,48 @@ def goal_heading(orient: torch.Tensor) -> torch.Tensor:
     return orient[:, :2, 1]
 
 
-def rollout_terms(model: WandrPrior, clips: WandrClips, starts: torch.Tensor, goal_frames: torch.Tensor, steps: int,
-                  body: BodyModel, free_bits: float, sample: bool = True) -> dict[str, torch.Tensor]:  # fmt: skip
+class HindsightTargets(Protocol):
+    """What a delta prior is conditioned on, hallucinated from the data's own future (WANDR's wrist goals,
+    CLOPS's head targets): goal frames for windows, and the 9 condition features towards them."""
+
+    def goal_frames(self, starts: torch.Tensor, steps: int, generator: torch.Generator | None = None) -> torch.Tensor:
+        """(B,) goal frames for windows starting at `starts` (B,) that roll out `steps` frames."""
+        ...
+
+    def features(self, state: WandrState, frames: torch.Tensor, goal_frames: torch.Tensor) -> torch.Tensor:
+        """(B, 9) features of bodies `state` (now at data frames `frames`, (B,)) towards their goal frames (B,)."""
+        ...
+
+
+@dataclass(frozen=True)
+class WristGoals:
+    """WANDR's targets: the right wrist at t_G and the heading there (see the module doc)."""
+
+    clips: WandrClips
+    config: WandrTrainConfig
+
+    def goal_frames(self, starts: torch.Tensor, steps: int, generator: torch.Generator | None = None) -> torch.Tensor:
+        return self.clips.sample_goal_frames(starts, steps, self.config.goal_horizon, self.config.far_goal_probability,
+                                             generator)  # fmt: skip
+
+    def features(self, state: WandrState, frames: torch.Tensor, goal_frames: torch.Tensor) -> torch.Tensor:
+        goal = self.clips.joints[goal_frames, RIGHT_WRIST]
+        return intention(state.joints, state.orient, goal, goal_frames - frames, goal_heading(self.clips.orient[goal_frames]),
+                         self.config.model.intentions)  # fmt: skip
+
+
+def rollout_terms(model: WandrPrior, clips: WandrClips, targets: HindsightTargets, starts: torch.Tensor,
+                  goal_frames: torch.Tensor, steps: int, body: BodyModel, free_bits: float,
+                  sample: bool = True) -> dict[str, torch.Tensor]:  # fmt: skip
     """Mean per-frame losses of rolling windows out for `steps` frames (the first from the data).
 
     Returns recon, joints (cm²), kl (with free bits), and joint_error_cm (steps,) per frame (no grad).
     """
-    goal = clips.joints[goal_frames, RIGHT_WRIST]
-    arrival_heading = goal_heading(clips.orient[goal_frames])
     state = clips.state(starts)
     totals = {"recon": 0.0, "joints": 0.0, "kl": 0.0}
     errors = []
     for step in range(steps):
-        frames_left = goal_frames - (starts + step)
-        features = intention(state.joints, state.orient, goal, frames_left, arrival_heading, model.config.intentions)
-        cond = model.normalise_condition(condition(state, features))
+        cond = model.normalise_condition(condition(state, targets.features(state, starts + step, goal_frames)))
         nxt = starts + step + 1
         target = pose_delta(state.transl, state.orient, state.pose, clips.transl[nxt], clips.orient[nxt], clips.pose[nxt])
         target = model.normalise_delta(target)
@@ -192,23 +221,20 @@ def rollout_terms(model: WandrPrior, clips: WandrClips, starts: torch.Tensor, go
 
 
 @torch.no_grad()
-def fit_statistics(model: WandrPrior, clips: WandrClips, config: WandrTrainConfig, body: BodyModel,
+def fit_statistics(model: WandrPrior, clips: WandrClips, targets: HindsightTargets, config: WandrTrainConfig,
                    max_samples: int = 50_000) -> None:  # fmt: skip
     """z-score statistics of the teacher-forced conditions and deltas of (up to `max_samples`) training windows."""
     starts = clips.window_starts(1)
     starts = starts[torch.randperm(len(starts))[:max_samples]]
-    goal_frames = clips.sample_goal_frames(starts, 1, config.goal_horizon, config.far_goal_probability)
     state = clips.state(starts)
-    goal = clips.joints[goal_frames, RIGHT_WRIST]
-    features = intention(state.joints, state.orient, goal, goal_frames - starts, goal_heading(clips.orient[goal_frames]),
-                         model.config.intentions)  # fmt: skip
+    features = targets.features(state, starts, targets.goal_frames(starts, 1))
     nxt = starts + 1
     deltas = pose_delta(state.transl, state.orient, state.pose, clips.transl[nxt], clips.orient[nxt], clips.pose[nxt])
     model.set_statistics(condition(state, features), deltas, config.condition_std_floor, config.delta_std_floor)
 
 
 @torch.no_grad()
-def validate(model: WandrPrior, clips: WandrClips, config: WandrTrainConfig, body: BodyModel,
+def validate(model: WandrPrior, clips: WandrClips, targets: HindsightTargets, config: WandrTrainConfig, body: BodyModel,
              max_windows: int = 1024) -> dict[str, float | list[float]]:  # fmt: skip
     """Posterior-mean reconstruction of validation windows: one teacher-forced frame and a `max_rollout` rollout."""
     model.eval()
@@ -217,8 +243,8 @@ def validate(model: WandrPrior, clips: WandrClips, config: WandrTrainConfig, bod
     for steps in (1, config.max_rollout):
         starts = clips.window_starts(steps)
         starts = starts[torch.linspace(0, len(starts) - 1, min(max_windows, len(starts))).long()]
-        goal_frames = clips.sample_goal_frames(starts, steps, config.goal_horizon, config.far_goal_probability, generator)
-        terms = rollout_terms(model, clips, starts, goal_frames, steps, body, config.free_bits, sample=False)
+        goal_frames = targets.goal_frames(starts, steps, generator)
+        terms = rollout_terms(model, clips, targets, starts, goal_frames, steps, body, config.free_bits, sample=False)
         if steps == 1:
             figures |= {"validation_recon": round(float(terms["recon"]), 5), "validation_kl": round(float(terms["kl"]), 4),
                         "validation_joint_error_cm_1_frame": round(float(terms["joint_error_cm"][0]), 3)}  # fmt: skip
@@ -238,9 +264,18 @@ def default_weights(config: WandrConfig, subsets: tuple[str, ...] = ("cmu",)) ->
 def train_wandr(config: WandrTrainConfig, train: WandrClips, validation: WandrClips) -> dict:
     """Train (or resume) WANDR's prior; returns the manifest entry it writes."""
     seed_everything(config.seed)
-    body = BodyModel()
     model = WandrPrior(config.model)
-    fit_statistics(model, train, config, body)
+    return train_delta_prior(model, WANDR_KIND, config, train, validation, lambda clips: WristGoals(clips, config),
+                             config.weights or default_weights(config.model))  # fmt: skip
+
+
+def train_delta_prior(model: WandrPrior, kind: str, config: WandrTrainConfig, train: WandrClips, validation: WandrClips,
+                      targets_of: Callable[[WandrClips], HindsightTargets], weights: Path) -> dict:  # fmt: skip
+    """The training loop shared by the per-frame delta priors (WANDR, CLOPS): statistics, scheduled rollouts,
+    linear lr decay, validation, ship to `weights`; returns the manifest entry."""
+    body = BodyModel()
+    train_targets = targets_of(train)
+    fit_statistics(model, train, train_targets, config)
     optimiser = torch.optim.Adam(model.parameters(), lr=config.learning_rate)
     batches_per_epoch = len(minibatches(train.window_starts(config.max_rollout, config.window_stride), config.batch_size,
                                         torch.Generator()))  # fmt: skip
@@ -258,16 +293,16 @@ def train_wandr(config: WandrTrainConfig, train: WandrClips, validation: WandrCl
         starts, step_number, steps = batch
         for group in optimiser.param_groups:  # linear decay, as the paper's 1e-4 -> 1e-5
             group["lr"] = config.learning_rate * (1 + (decay - 1) * step_number / total_steps)
-        goal_frames = train.sample_goal_frames(starts, steps, config.goal_horizon, config.far_goal_probability)
-        terms = rollout_terms(model, train, starts, goal_frames, steps, body, config.free_bits)
+        goal_frames = train_targets.goal_frames(starts, steps)
+        terms = rollout_terms(model, train, train_targets, starts, goal_frames, steps, body, config.free_bits)
         beta = config.kl_beta(step_number, epoch)
         return {"total": terms["recon"] + terms["joints"] + beta * terms["kl"], "recon": terms["recon"],
                 "joints": terms["joints"], "kl": terms["kl"]}  # fmt: skip
 
-    history = fit(model, optimiser, config.fit_settings(WANDR_KIND), epoch_batches, loss_terms,
+    history = fit(model, optimiser, config.fit_settings(kind), epoch_batches, loss_terms,
                   lambda epoch: f"rollout ≤ {config.rollout_limit(epoch)}")  # fmt: skip
-    entry = config.entry(WANDR_KIND, config.model, history, **validate(model, validation, config, body))
-    return ship(model, config.weights or default_weights(config.model), entry)
+    entry = config.entry(kind, model.config, history, **validate(model, validation, targets_of(validation), config, body))
+    return ship(model, weights, entry)
 
 
 def load_wandr(path: str | Path | None = None) -> WandrPrior:

@@ -144,10 +144,13 @@ class WandrStepper:
         delta = self.prior.denormalise_delta(self.prior.decode(z, self.condition(state, goal, frames_left)))
         transl, orient, pose = integrate(state.transl, state.orient, state.pose, delta)
         following, posed = make_state(self.body, transl, orient, pose, delta)
-        feet = self.feet(posed)
+        return self.grounded(following, self.feet(posed))
+
+    def grounded(self, state: WandrState, feet: torch.Tensor) -> tuple[WandrState, torch.Tensor]:
+        """Bodies and their foot vertices (B, V, 3) moved vertically so the lowest foot vertex is on the floor
+        (unchanged without `ground_feet`)."""
         if not self.ground_feet:
-            return following, feet
-        lift = torch.zeros_like(transl)
+            return state, feet
+        lift = torch.zeros_like(state.transl)
         lift[:, 2] = -feet[..., 2].amin(dim=-1)
-        grounded = following._replace(transl=transl + lift, joints=following.joints + lift[:, None])
-        return grounded, feet + lift[:, None]
+        return state._replace(transl=state.transl + lift, joints=state.joints + lift[:, None]), feet + lift[:, None]

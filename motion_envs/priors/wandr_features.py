@@ -145,5 +145,5 @@ def condition(state: WandrState, intention_features: torch.Tensor) -> torch.Tens
 def make_state(body: BodyModel, transl: torch.Tensor, orient: torch.Tensor, pose: torch.Tensor,
                previous_delta: torch.Tensor) -> tuple[WandrState, BodyPose]:  # fmt: skip
     """A `WandrState` with its joints from forward kinematics (rotations as matrices), and the posed body."""
-    posed = body(transl, matrix_to_sixd(orient), matrix_to_sixd(pose))
+    posed = body.from_matrices(transl, orient, pose)
     return WandrState(transl, orient, pose, previous_delta, posed.joints), posed

@@ -122,7 +122,9 @@ class CurveCallback(BaseCallback):
             if self.curve[-1]["success_rate"] > best:
                 atomic_write(self.run_dir / "best.zip", self.model.save)
         atomic_write(self.run_dir / "model.zip", self.model.save)
-        atomic_write(self.run_dir / "vecnormalize.pkl", lambda file: pickle.dump(self.model.get_vec_normalize_env(), file))
+        normaliser = self.model.get_vec_normalize_env()
+        if normaliser is not None:
+            atomic_write(self.run_dir / "vecnormalize.pkl", lambda file: pickle.dump(normaliser, file))
         text = json.dumps(self.curve, indent=1)
         atomic_write(self.run_dir / "curve.json", lambda file: file.write(text.encode()))
 
@@ -185,14 +187,14 @@ def train_ppo(config: PPOTrainConfig, clone_from: GoalWindows | None = None) -> 
     return entry
 
 
-def plot_curve(curve: list[dict], destination: Path) -> None:
+def plot_curve(curve: list[dict], destination: Path, steps_label: str = "env steps (primitives)") -> None:
     """Success rate against env steps and against wall time."""
     if not curve:
         return
     figure, (by_steps, by_time) = plt.subplots(1, 2, figsize=(9, 3.5))
     rates = [point["success_rate"] for point in curve]
     by_steps.plot([point["timesteps"] for point in curve], rates)
-    by_steps.set(xlabel="env steps (primitives)", ylabel="success rate", ylim=(0, 1))
+    by_steps.set(xlabel=steps_label, ylabel="success rate", ylim=(0, 1))
     by_time.plot([point["wall_seconds"] / 60 for point in curve], rates)
     by_time.set(xlabel="wall time (min)", ylim=(0, 1))
     figure.tight_layout()

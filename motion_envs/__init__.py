@@ -19,6 +19,10 @@ ENV_SPECS: dict[str, tuple[str, str]] = {
         "motion_envs.envs.wandr_reach:WandrReachEnv",
         "motion_envs.envs.wandr_reach:WandrReachVectorEnv",
     ),
+    "motion_envs/ClopsNav-v0": (
+        "motion_envs.envs.clops_nav:ClopsNavEnv",
+        "motion_envs.envs.clops_nav:ClopsNavVectorEnv",
+    ),
 }
 """Environment id -> (entry point, native vector entry point)."""
 

@@ -47,6 +47,18 @@ def _bench_gamma(args: argparse.Namespace) -> int:
     return gamma_control(pairs=args.pairs, clones=args.clones, seed=args.seed, quick=args.quick, bf16=args.bf16)
 
 
+def _bench_clops(args: argparse.Namespace) -> int:
+    from benchmarks.clops_matrix import main as clops_matrix
+    from motion_envs.scenes.layouts import FAMILIES
+
+    families = tuple(args.families.split(",")) if args.families else tuple(FAMILIES)
+    unknown = set(families) - set(FAMILIES)
+    if unknown:
+        print(f"unknown families {sorted(unknown)}; choose from {', '.join(FAMILIES)}", file=sys.stderr)
+        return 2
+    return clops_matrix(episodes_per_family=args.episodes, families=families, seed=args.seed)
+
+
 def _bench_wandr(args: argparse.Namespace) -> int:
     from benchmarks.wandr_grid import main as wandr_grid
 
@@ -147,6 +159,24 @@ def _train_ppo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _train_dqn(args: argparse.Namespace) -> int:
+    from agents.train_dqn import DQNTrainConfig, train_dqn
+
+    given = {"family": args.family, "known_goal": args.known_goal or None, "num_envs": args.num_envs,
+             "total_timesteps": args.timesteps, "run_dir": args.run_dir, "weights": args.weights, "seed": args.seed,
+             "learning_rate": args.learning_rate, "batch_size": args.batch_size,
+             "env_kwargs": dict(_env_option(option) for option in args.env_option) or None}  # fmt: skip
+    config = DQNTrainConfig(command="motion-envs " + " ".join(sys.argv[1:]),
+                            **{name: value for name, value in given.items() if value is not None})  # fmt: skip
+    if config.run_dir == DQNTrainConfig.run_dir:
+        config.run_dir = Path(f"runs/{config.weights_path().stem}")
+    entry = train_dqn(config)
+    last = entry["curve"][-1] if entry["curve"] else {}
+    print(f"{entry['timesteps']} steps; latest success rate {last.get('success_rate', float('nan')):.2f}; "
+          f"weights {config.weights_path()}")
+    return 0
+
+
 def _env_option(option: str) -> tuple[str, object]:
     """'key=value' -> (key, value as JSON if it parses, else the string)."""
     key, equals, value = option.partition("=")
@@ -163,6 +193,10 @@ def _train(args: argparse.Namespace) -> int:
         return _train_ppo(args)
     if args.what == "wandr":
         return _train_wandr(args)
+    if args.what == "clops":
+        return _train_clops(args)
+    if args.what == "dqn":
+        return _train_dqn(args)
     if args.what != "gamma":
         return _not_yet(f"train {args.what}")(args)
     stages = {"predictor": _train_gamma_predictor, "regressor": _train_gamma_regressor, "pose-vae": _train_gamma_pose_vae,
@@ -208,6 +242,34 @@ def _train_wandr(args: argparse.Namespace) -> int:
         if key.startswith("validation"):
             print(f"{key}: {json.dumps(value)}")
     print(f"weights {config.weights}")
+    return 0
+
+
+def _train_clops(args: argparse.Namespace) -> int:
+    from motion_envs.body import BodyModel
+    from motion_envs.data.build import build
+    from motion_envs.data.dataset import MotionDataset
+    from motion_envs.priors.clops import ClopsConfig
+    from motion_envs.priors.train_clops import ClopsTrainConfig, train_clops
+    from motion_envs.priors.train_wandr import WandrClips
+    from motion_envs.priors.wandr_features import FPS
+
+    dataset = MotionDataset.load(build(mocap_dir=args.mocap_dir, cache_dir=args.cache_dir, subsets=tuple(dict.fromkeys(args.subset)),
+                                       fps_list=(FPS,)).caches[FPS])  # fmt: skip
+    model = ClopsConfig(**{name: value for name, value in (("layers", args.layers), ("actions", args.actions)) if value})
+    given = {"epochs": args.epochs, "batch_size": args.batch_size, "window_stride": args.window_stride, "seed": args.seed,
+             "max_rollout": args.max_rollout, "kl_weight": args.kl_weight, "weights": args.weights, "run_dir": args.run_dir}  # fmt: skip
+    if args.clops_init is not None:
+        given["init"] = None if str(args.clops_init) == "scratch" else args.clops_init
+    config = ClopsTrainConfig(model=model, data_hash=dataset.path.stem, command="motion-envs " + " ".join(sys.argv[1:]),
+                              **{key: value for key, value in given.items() if value is not None or key == "init"})  # fmt: skip
+    body = BodyModel()
+    entry = train_clops(config, WandrClips.from_dataset(dataset, "train", body, mirrored=True),
+                        WandrClips.from_dataset(dataset, "validation", body))  # fmt: skip
+    for key, value in entry.items():
+        if key.startswith("validation"):
+            print(f"{key}: {json.dumps(value)}")
+    print(f"weights {config.weights or 'motion_envs/priors/weights/clops.pt'}")
     return 0
 
 
@@ -307,7 +369,7 @@ def parser() -> argparse.ArgumentParser:
     starts.set_defaults(run=_data_start_poses)
 
     train = commands.add_parser("train", help="train a prior or a policy (resumable: rerun the same command)")
-    train.add_argument("what", help="gamma | ppo | wandr | clops | dqn (gamma, ppo and wandr so far)")
+    train.add_argument("what", help="gamma | ppo | wandr | clops | dqn")
     train.add_argument("--stage", default="predictor", help="gamma: predictor | regressor | pose-vae | g-cvae")
     train.add_argument("--seed-frames", type=int, default=2, choices=(1, 2), help="predictor: seed frames")
     train.add_argument("--epochs", type=int, default=None, help="epochs (predictor: single-primitive epochs)")
@@ -319,16 +381,16 @@ def parser() -> argparse.ArgumentParser:
     train.add_argument("--env", default=None, help="ppo: environment id (default motion_envs/GammaReach-v0)")
     train.add_argument("--reward", default=None, help="ppo: reward config, paper | release")
     train.add_argument("--alpha", type=float, default=None, help="ppo: weight of the KL-to-prior regulariser (paper: 1, 10)")
-    train.add_argument("--num-envs", type=int, default=None, help="ppo: bodies stepped together")
-    train.add_argument("--timesteps", type=int, default=None, help="ppo: total env steps (primitives)")
+    train.add_argument("--num-envs", type=int, default=None, help="ppo, dqn: bodies stepped together")
+    train.add_argument("--timesteps", type=int, default=None, help="ppo, dqn: total env steps (primitives; dqn: actions)")
     train.add_argument("--init", choices=("data", "scratch"), default=None,
                        help="ppo: start the actor from the data's latents (default) or from scratch")
     train.add_argument("--log-std-init", type=float, default=None, help="ppo: initial log sigma of the policy (default -1)")
-    train.add_argument("--learning-rate", type=float, default=None, help="ppo: Adam learning rate")
+    train.add_argument("--learning-rate", type=float, default=None, help="ppo, dqn: Adam learning rate")
     train.add_argument("--n-steps", type=int, default=None, help="ppo: primitives per body per rollout")
     train.add_argument("--anchor", type=float, default=None, help="ppo: weight of KL to the cloned policy (default 0)")
     train.add_argument("--env-option", action="append", default=[], metavar="KEY=VALUE",
-                       help="ppo: a further gym.make argument of the env, e.g. frames_per_step=2 (repeatable)")
+                       help="ppo, dqn: a further gym.make argument of the env, e.g. frames_per_step=2 (repeatable)")
     train.add_argument("--intentions", default=None,
                        help="wandr: intention components, comma-separated (default wrist,pelvis,orientation)")
     train.add_argument("--layers", type=int, default=None, help="wandr: Linear layers of encoder and decoder (default 8)")
@@ -336,6 +398,10 @@ def parser() -> argparse.ArgumentParser:
     train.add_argument("--kl-weight", type=float, default=None, help="wandr: β of the KL term (paper 0.01)")
     train.add_argument("--late-kl-weight", type=float, default=None, help="wandr: β from --kl-raise-epoch on")
     train.add_argument("--kl-raise-epoch", type=int, default=None, help="wandr: first epoch of --late-kl-weight")
+    train.add_argument("--family", default=None, help="dqn: ClopsNav scene family trained on (default open)")
+    train.add_argument("--known-goal", action="store_true", help="dqn: also observe the goal position (CLOPS + known goal)")
+    train.add_argument("--actions", type=int, default=None, help="clops: k-means head-delta clusters K (default 16)")
+    train.add_argument("--clops-init", default=None, help="clops: WANDR weights to start from, or 'scratch' (default: shipped wandr.pt)")
     train.add_argument("--seed", type=int, default=None)
     _add_data_args(train, ["cmu"])
     train.set_defaults(run=_train)
@@ -361,6 +427,11 @@ def parser() -> argparse.ArgumentParser:
     bench_wandr.add_argument("--variants-dir", type=Path, default=Path("runs/wandr_weights"),
                              help="ablation / data-variant weights to add as rows (not shipped)")
     bench_wandr.set_defaults(run=_bench_wandr)
+    bench_clops = bench.add_parser("clops", help="CLOPS scene matrix: shipped ClopsNav policies on every family's test seeds")
+    bench_clops.add_argument("--episodes", type=int, default=100, help="test seeds per family, one episode each (max 100)")
+    bench_clops.add_argument("--families", default=None, help="comma-separated layout families (default: all five)")
+    bench_clops.add_argument("--seed", type=int, default=0)
+    bench_clops.set_defaults(run=_bench_clops)
     bench.add_parser("speed", help="GAMMA rollout body-primitives/s by batch, fp32 and bf16 (throughput.md)").set_defaults(
         run=_bench_speed
     )

@@ -178,3 +178,35 @@ def wrist_progress(previous_distance: torch.Tensor, distance: torch.Tensor) -> t
 def latent_cost(z: torch.Tensor) -> torch.Tensor:
     """(N, D) latents -> (N,) mean square, 1 for typical draws from N(0, I)."""
     return (z**2).mean(dim=-1)
+
+
+@dataclass(frozen=True)
+class ClopsRewardConfig:
+    """Scales of CLOPS's reward (Eq. 5), paid per action; the paper's constants were lost from its text, these are ours.
+
+    r = −time − collision · collided − still · stayed + goal · found
+    """
+
+    time: float = 0.1
+    """Every action (pushes towards reaching the goal sooner)."""
+    collision: float = 1.0
+    """An action during which any body sphere penetrates the scene (`ClopsNavConfig.collision_tolerance`)."""
+    still: float = 0.5
+    """An action after which the head has neither moved nor turned (`ClopsNavConfig.still_distance`, `still_angle`)."""
+    goal: float = 10.0
+    """The action that ends with the goal near (`success_distance`) and in view (any goal-mask pixel)."""
+
+    @classmethod
+    def named(cls, spec: str) -> ClopsRewardConfig:
+        """'default', optionally with fields changed: 'default:collision=0.5'."""
+        return named_config(spec, {"default": cls})
+
+
+def stayed_still(moved: torch.Tensor, turned: torch.Tensor, distance: float, angle: float) -> torch.Tensor:
+    """(N,) bool: a head moved less than `distance` metres (moved, (N,)) and turned less than `angle` radians (turned, (N,))."""
+    return (moved < distance) & (turned.abs() < angle)
+
+
+def goal_found(distance: torch.Tensor, visible: torch.Tensor, success_distance: float) -> torch.Tensor:
+    """(N,) bool: the goal within `success_distance` (distance, (N,), metres on the ground) and visible ((N,) bool)."""
+    return (distance <= success_distance) & visible

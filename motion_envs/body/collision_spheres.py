@@ -30,8 +30,13 @@ def _bones() -> tuple[list[int], list[int], list[float]]:
 
 def collision_spheres(pose: BodyPose) -> tuple[torch.Tensor, torch.Tensor]:
     """Centres (..., 63, 3) and radii (63,) of 3 spheres on each of the 21 bones of the posed bodies."""
+    return spheres_of_joints(pose.joints)
+
+
+def spheres_of_joints(joints: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Centres (..., 63, 3) and radii (63,) of the collision spheres of bodies with joints (..., 22, 3)."""
     children, parents, radii = _bones()
-    child, parent = pose.joints[..., children, :], pose.joints[..., parents, :]
+    child, parent = joints[..., children, :], joints[..., parents, :]
     centres = torch.cat([child, 0.5 * (child + parent), parent], dim=-2)
-    radius = torch.tensor(radii, dtype=pose.joints.dtype, device=pose.joints.device).repeat(3)
+    radius = torch.tensor(radii, dtype=joints.dtype, device=joints.device).repeat(3)
     return centres, radius

@@ -41,7 +41,10 @@ def eye_offset() -> tuple[float, float, float]:
 
 def head_camera(pose: BodyPose) -> CameraFrame:
     """Camera frame of each posed body: eye on the face, gaze along the head's forward (+y)."""
-    rotation = pose.rotations[..., HEAD, :, :]
+    return camera_from_head(pose.joints[..., HEAD, :], pose.rotations[..., HEAD, :, :])
+
+
+def camera_from_head(position: torch.Tensor, rotation: torch.Tensor) -> CameraFrame:
+    """Camera frame from head joint positions (..., 3) and world rotations (..., 3, 3)."""
     offset = torch.tensor(eye_offset(), dtype=rotation.dtype, device=rotation.device)
-    eye = pose.joints[..., HEAD, :] + (rotation @ offset)
-    return CameraFrame(eye=eye, rotation=rotation)
+    return CameraFrame(eye=position + rotation @ offset, rotation=rotation)

@@ -14,6 +14,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from motion_envs.batched import BatchedState
 from motion_envs.body import BodyModel
 from motion_envs.render.env_view import EnvView, RenderInputs
+from motion_envs.scenes.scene import Scene
 
 Config = TypeVar("Config")
 
@@ -43,6 +44,31 @@ def config_from_kwargs(config_type: type[Config], kwargs: dict[str, Any], env_na
     return config_type(**kwargs)
 
 
+Observation = Any
+"""A batch of observations: an array (N, ...) or a dict of them."""
+
+
+def as_numpy(observation: torch.Tensor | np.ndarray | dict) -> Observation:
+    """Tensors (and dicts of them) as numpy arrays."""
+    if isinstance(observation, dict):
+        return {key: as_numpy(value) for key, value in observation.items()}
+    return observation.cpu().numpy() if isinstance(observation, torch.Tensor) else observation
+
+
+def _rows(observation: Observation, rows: Any) -> Observation:
+    if isinstance(observation, dict):
+        return {key: value[rows] for key, value in observation.items()}
+    return observation[rows]
+
+
+def _set_rows(observation: Observation, rows: np.ndarray, values: Observation) -> None:
+    if isinstance(observation, dict):
+        for key in observation:
+            observation[key][rows] = values[key]
+    else:
+        observation[rows] = values
+
+
 class BatchedCore(Protocol):
     """What `CoreVectorEnv` needs of an environment's batched core."""
 
@@ -50,7 +76,7 @@ class BatchedCore(Protocol):
 
     def sample_initial_state(self, rngs: list[np.random.Generator], options: dict[str, Any] | None = None) -> Any: ...
 
-    def observe(self, state: Any) -> torch.Tensor: ...
+    def observe(self, state: Any) -> torch.Tensor | np.ndarray | dict[str, np.ndarray]: ...
 
     def step(self, state: Any, z: torch.Tensor) -> tuple[Any, Any]: ...
 
@@ -66,7 +92,8 @@ class CoreVectorEnv(VectorEnv):
     `info["final_info"]`). Subclasses build the core and say what goes into `info` (`_step_info`).
 
     `render_mode="rgb_array"`: `render()` draws the first `render_bodies` bodies in one image (camera on
-    their mean pelvis), each with its goal and pelvis trail."""
+    their mean pelvis), each with its goal and pelvis trail, in the core's `render_scene(state)` where the
+    core has one."""
 
     metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": ["rgb_array"]}
 
@@ -77,6 +104,7 @@ class CoreVectorEnv(VectorEnv):
             raise ValueError(f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}")
         self.render_mode, self.render_bodies = render_mode, render_bodies
         self._view: EnvView | None = None
+        self._view_scene: Scene | None = None
         self.trails: list[list[np.ndarray]] = []
         self.core = core
         self.num_envs = num_envs
@@ -93,7 +121,7 @@ class CoreVectorEnv(VectorEnv):
         self.state = self.core.sample_initial_state(self.rngs, options)
         if self.render_mode is not None:
             self.trails = [[pelvis] for pelvis in self._drawn_pelvis()]
-        return self.core.observe(self.state).cpu().numpy(), {}
+        return as_numpy(self.core.observe(self.state)), {}
 
     def _step_info(self, result: Any) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         """(info of every body, final info of the bodies that ended: arrays over all bodies, with is_success)."""
@@ -105,20 +133,20 @@ class CoreVectorEnv(VectorEnv):
         z = check_actions(actions, self.single_action_space.shape, batch=self.num_envs)
         self.state, result = self.core.step(self.state, torch.as_tensor(z))
         done = (result.terminated | result.truncated).cpu()
-        observation = self.core.observe(self.state).cpu().numpy()
+        observation = as_numpy(self.core.observe(self.state))
         info, final = self._step_info(result)
         if done.any():
             ended = torch.nonzero(done).flatten()
-            info["final_obs"] = np.empty(self.num_envs, dtype=object)  # one array per ended body, None elsewhere
+            info["final_obs"] = np.empty(self.num_envs, dtype=object)  # one observation per ended body, None elsewhere
             for i in ended.tolist():
-                info["final_obs"][i] = observation[i]
+                info["final_obs"][i] = _rows(observation, i)
             info["final_info"] = {**final, **{f"_{name}": done.numpy() for name in final}}
             info["_final_obs"] = info["_final_info"] = done.numpy()
             fresh = self.core.sample_initial_state([self.rngs[i] for i in ended.tolist()])
             order = torch.zeros(self.num_envs, dtype=torch.long)
             order[ended] = torch.arange(len(ended))  # fresh body k goes to row ended[k]; other rows are masked
             self.state = self.state.replace_bodies(done.to(self.core.device), fresh.index(order.to(self.core.device)))
-            observation = self.core.observe(self.state).cpu().numpy()
+            _set_rows(observation, ended.numpy(), as_numpy(self.core.observe(fresh)))  # only the new bodies are observed
         if self.render_mode is not None:
             for trail, pelvis, restarted in zip(self.trails, self._drawn_pelvis(), done.tolist()):
                 trail[:] = [pelvis] if restarted else [*trail, pelvis]
@@ -129,8 +157,10 @@ class CoreVectorEnv(VectorEnv):
         """rgb_array: (H, W, 3) uint8 of the first `render_bodies` bodies (None without a render mode)."""
         if self.render_mode is None or self.state is None:
             return None
-        if self._view is None:
-            self._view = EnvView(self.core.body, *self.core.goal_marker, max_bodies=self.render_bodies)
+        scene = self.core.render_scene(self.state) if hasattr(self.core, "render_scene") else None  # cores with a scene
+        if self._view is None or self._view_scene is not scene:
+            self._view = EnvView(self.core.body, *self.core.goal_marker, max_bodies=self.render_bodies, scene=scene)
+            self._view_scene = scene
         return self._view.frame(self.core.render_inputs(self.state), [np.array(trail) for trail in self.trails])
 
     def _drawn_pelvis(self) -> np.ndarray:

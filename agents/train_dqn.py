@@ -1,0 +1,113 @@
+"""`motion-envs train dqn`: CLOPS's double DQN with prioritised replay on ClopsNav-v0, resumable, with a learning curve.
+
+Reads top to bottom: the native vector env (`num_envs` bodies, each in a
+room of `family`) -> VecMonitor -> `PrioritizedDoubleDQN` with SB3's
+`CnnPolicy` (NatureCNN on the 5 × 64 × 64 view; `MultiInputPolicy` with the
+known goal) -> learn with `CurveCallback` (every `checkpoint_minutes`: the
+model saved atomically, the success rate of the episodes finished since) ->
+the best window's policy under `priors/weights/` + manifest entry + the
+learning-curve plot.
+
+Resuming reloads the model, not the replay buffer (50k views are 2 GB): the
+buffer refills for `learning_starts` steps before updates go on.
+
+The paper's hyperparameter table lost its numbers (REFERENCE_NOTES §5);
+ours are sized for two CPU cores (documented on each field).
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import sys
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import torch
+from stable_baselines3.common.vec_env import VecMonitor
+
+from agents.double_dqn import PrioritizedDoubleDQN
+from agents.train_ppo import CurveCallback, plot_curve
+from agents.vec_env import NativeVecEnv
+from motion_envs.atomic import atomic_write
+from motion_envs.priors.training import WEIGHTS_DIR, record_in_manifest
+
+
+@dataclass
+class DQNTrainConfig:
+    env_id: str = "motion_envs/ClopsNav-v0"
+    family: str = "open"
+    """The layout family trained on (the paper trains one policy per Replica scene)."""
+    known_goal: bool = False
+    env_kwargs: dict = field(default_factory=dict)
+    num_envs: int = 32
+    total_timesteps: int = 150_000
+    """Actions (transitions); ~1 s of motion each."""
+    buffer_size: int = 50_000
+    learning_starts: int = 2_000
+    batch_size: int = 64
+    learning_rate: float = 2.5e-4
+    gamma: float = 0.97
+    """Episodes are ~15 actions: a horizon of ~30 actions is plenty."""
+    gradient_steps: int = 4
+    """Per vector step of `num_envs` transitions: 4 × 64 samples per 32 transitions, each replayed ~8 times."""
+    target_update_interval: int = 2_000
+    exploration_fraction: float = 0.3
+    exploration_final_eps: float = 0.05
+    alpha: float = 0.6
+    beta_start: float = 0.4
+    checkpoint_minutes: float = 3.0
+    seed: int = 0
+    run_dir: Path = Path("runs/dqn")
+    weights: Path | None = None
+    command: str = ""
+
+    def weights_path(self) -> Path:
+        known = "_known_goal" if self.known_goal else ""
+        return self.weights or WEIGHTS_DIR / f"dqn_clopsnav_{self.family}{known}.zip"
+
+
+def make_model(config: DQNTrainConfig, venv: VecMonitor) -> PrioritizedDoubleDQN:
+    policy = "MultiInputPolicy" if config.known_goal else "CnnPolicy"
+    return PrioritizedDoubleDQN(
+        policy, venv, alpha=config.alpha, beta_start=config.beta_start, buffer_size=config.buffer_size,
+        learning_starts=config.learning_starts, batch_size=config.batch_size, learning_rate=config.learning_rate,
+        gamma=config.gamma, train_freq=1, gradient_steps=config.gradient_steps,
+        target_update_interval=config.target_update_interval, exploration_fraction=config.exploration_fraction,
+        exploration_final_eps=config.exploration_final_eps, seed=config.seed, device="cpu",
+        tensorboard_log=str(config.run_dir / "tensorboard"),
+    )  # fmt: skip
+
+
+def train_dqn(config: DQNTrainConfig) -> dict:
+    """Train (or resume) a ClopsNav policy; returns the manifest entry it writes."""
+    config.run_dir.mkdir(parents=True, exist_ok=True)
+    torch.manual_seed(config.seed)
+    venv = VecMonitor(NativeVecEnv.make(config.env_id, num_envs=config.num_envs, family=config.family,
+                                        known_goal=config.known_goal, **config.env_kwargs))  # fmt: skip
+    venv.seed(config.seed)
+    checkpoint, curve_path = config.run_dir / "model.zip", config.run_dir / "curve.json"
+    curve = json.loads(curve_path.read_text()) if curve_path.exists() else []
+    if checkpoint.exists():
+        model = PrioritizedDoubleDQN.load(checkpoint, env=venv, device="cpu")
+        model.learning_starts = model.num_timesteps + config.learning_starts  # refill the (unsaved) buffer first
+        print(f"resuming {checkpoint} at {model.num_timesteps} steps", file=sys.stderr)
+    else:
+        model = make_model(config, venv)
+    callback = CurveCallback(config.run_dir, config.checkpoint_minutes, curve)
+    remaining = config.total_timesteps - model.num_timesteps
+    if remaining > 0:
+        model.learn(total_timesteps=remaining, callback=callback, reset_num_timesteps=False, progress_bar=True)
+        callback.save()
+    weights = config.weights_path()
+    best = max(curve, key=lambda point: point["success_rate"]) if curve else None
+    if best is not None and (config.run_dir / "best.zip").exists():
+        shutil.copyfile(config.run_dir / "best.zip", weights)
+    else:
+        atomic_write(weights, model.save)
+    entry = {"kind": "dqn_policy", "config": {k: str(v) if isinstance(v, Path) else v for k, v in asdict(config).items()},
+             "timesteps": int(model.num_timesteps), "curve": curve, "torch": str(torch.__version__),
+             "shipped": f"best window: {best['timesteps']} steps" if best else "last"}  # fmt: skip
+    record_in_manifest(weights, entry)
+    plot_curve(curve, config.run_dir / "curve.png", steps_label="env steps (actions)")
+    return entry

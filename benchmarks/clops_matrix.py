@@ -1,0 +1,219 @@
+"""CLOPS's scene matrix (`motion-envs bench clops`): the paper's protocol (Sec. 4.1-4.2) on our room families.
+
+Every shipped ClopsNav policy (`priors/weights/dqn_clopsnav_<family>.zip`,
+trained on one layout family) is evaluated on the held-out test seeds of
+every family (`TEST_SEEDS`: one episode per seed, `episodes` seeds per
+family, the same starts and goals for every row). Per row and family:
+
+* SR: % of episodes that reached a state with the goal within
+  `success_distance` (1 m) on the ground and in view (any goal pixel);
+* Col: % of actions (about 1 s of motion each) during which any collision
+  sphere penetrated the scene by more than 2 cm;
+* FS: % of frames whose lowest foot vertex slid more than 0.66 cm (WANDR's
+  measure, the same authors').
+
+Rows beside the DQN policies: uniformly random actions; the non-visual
+GAMMA navigator told the goal (EgoGen-like, `baselines.gamma_navigator`);
+the known-goal DQN policy (`dqn_clopsnav_<family>_known_goal.zip`) where
+shipped. The paper's numbers go beside (its Table 1 matrix on Replica S1-S5
+and its Table 2). Writes `benchmarks/results/clops_matrix.md`, and
+`clops_matrix.png`: the egocentric frames of one episode (semantic colours,
+goal pixels red) over its top-down path, and the SR matrix.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from benchmarks.machine import machine_line
+from benchmarks.sections import replace_section
+from motion_envs.atomic import atomic_write
+from motion_envs.envs.clops_nav import ClopsNavConfig, ClopsNavCore, ClopsNavState
+from motion_envs.plots import plt, save, top_down
+from motion_envs.priors.training import WEIGHTS_DIR
+from motion_envs.priors.wandr_features import PELVIS
+from motion_envs.scenes.layouts import FAMILIES, TEST_SEEDS
+
+RESULTS = Path(__file__).resolve().parent / "results"
+PAPER_TABLE2 = {  # SR %, Col %, FS %
+    "EgoGen, known goal (paper)": (48, 31, 40),
+    "CLOPS, vision only (paper)": (68, 27, 27),
+    "CLOPS + known goal (paper)": (100, 36, 26),
+}
+PAPER_SR_MATRIX = [[93, 84, 96, 78, 85], [78, 87, 93, 73, 78], [81, 72, 84, 72, 72], [90, 84, 94, 78, 73], [87, 78, 90, 66, 68]]
+PAPER_COL_MATRIX = [[26, 16, 35, 42, 40], [42, 10, 35, 43, 43], [40, 20, 19, 45, 38], [39, 20, 35, 38, 38], [39, 17, 36, 40, 27]]
+GAMMA_POLICY = WEIGHTS_DIR / "ppo_gammareach_alpha1_paper.zip"
+
+Controller = Callable[[ClopsNavCore, ClopsNavState], torch.Tensor]
+
+
+@dataclass(frozen=True)
+class Scores:
+    """One row on one family: SR, Col, FS in %, and the pelvis paths (N, T, 2) and views of episode 0."""
+
+    success: float
+    collision: float
+    skating: float
+    seconds: float
+    paths: np.ndarray
+    views: list[np.ndarray]
+
+
+def random_actions(seed: int) -> Controller:
+    generator = torch.Generator().manual_seed(seed)
+
+    def act(core: ClopsNavCore, state: ClopsNavState) -> torch.Tensor:
+        return torch.randint(core.num_actions, (state.num_bodies,), generator=generator)
+
+    return act
+
+
+def policy_actions(path: Path) -> Controller:
+    from agents.double_dqn import PrioritizedDoubleDQN
+
+    model = PrioritizedDoubleDQN.load(path, device="cpu")
+
+    def act(core: ClopsNavCore, state: ClopsNavState) -> torch.Tensor:
+        actions, _ = model.predict(core.observe(state), deterministic=True)
+        return torch.as_tensor(actions)
+
+    return act
+
+
+def episodes(core: ClopsNavCore, count: int) -> ClopsNavState:
+    """The family's first `count` test seeds, one episode each (episode seed = scene seed)."""
+    seeds = list(TEST_SEEDS)[:count]
+    return core.sample_initial_state([np.random.default_rng(seed) for seed in seeds], {"scene_seed": seeds})
+
+
+def run(core: ClopsNavCore, state: ClopsNavState, controller: Controller) -> Scores:
+    """Step every episode to its end (found or 15 s); frozen bodies are not counted after their end."""
+    count = state.num_bodies
+    alive = torch.ones(count, dtype=torch.bool)
+    actions, collided = torch.zeros(count), torch.zeros(count)
+    paths, views = [state.joints[:, PELVIS, :2].numpy()], [state.view[0].numpy()]
+    while alive.any():
+        state, result = core.step(state, controller(core, state))
+        actions += alive.float()
+        collided += (result.collided & alive).float()
+        paths.append(np.where(alive[:, None].numpy(), state.joints[:, PELVIS, :2].numpy(), np.nan))
+        if alive[0]:
+            views.append(state.view[0].numpy())
+        alive &= ~(result.terminated | result.truncated)
+    return Scores(100 * float(state.found.float().mean()), 100 * float(collided.sum() / actions.sum()),
+                  100 * float(state.skated.sum() / state.frame.sum()), float(state.frame.float().mean()) / 30,
+                  np.stack(paths, 1), views)  # fmt: skip
+
+
+def gamma_row(core: ClopsNavCore, state: ClopsNavState) -> Scores:
+    from agents.ppo_kl import PPOKL
+    from baselines.gamma_navigator import gamma_navigate
+
+    stats = gamma_navigate(core, state, PPOKL.load(GAMMA_POLICY, device="cpu"))
+    return Scores(100 * float(stats.found.mean()), 100 * float(stats.collided_seconds.sum() / max(stats.seconds.sum(), 1)),
+                  100 * float(stats.skated.sum() / max(stats.frames.sum(), 1)), float(stats.seconds.mean()), stats.paths, [])  # fmt: skip
+
+
+def main(episodes_per_family: int = 100, families: tuple[str, ...] = tuple(FAMILIES), seed: int = 0) -> int:
+    torch.manual_seed(seed)
+    policies = {path.stem.removeprefix("dqn_clopsnav_"): path for path in sorted(WEIGHTS_DIR.glob("dqn_clopsnav_*.zip"))}
+    rows: dict[str, dict[str, Scores]] = {}
+    started = time.perf_counter()
+    for family in families:
+        for known in (False, True):
+            core = ClopsNavCore(ClopsNavConfig(family=family, split="test", known_goal=known))
+            state = episodes(core, episodes_per_family)
+            controllers: dict[str, Callable[[], Scores]] = {}
+            if not known:
+                controllers["random actions"] = lambda: run(core, state.clone(), random_actions(seed))
+                controllers["GAMMA navigator, known goal (EgoGen-like)"] = lambda: gamma_row(core, state.clone())
+            for name, path in policies.items():
+                if name.endswith("_known_goal") == known:
+                    label = f"CLOPS DQN trained on {name.removesuffix('_known_goal')}" + (" + known goal" if known else "")
+                    controllers[label] = lambda path=path: run(core, state.clone(), policy_actions(path))
+            for label, evaluate in controllers.items():
+                tick = time.perf_counter()
+                rows.setdefault(label, {})[family] = scores = evaluate()
+                print(f"{label} on {family}: SR {scores.success:.0f}%  Col {scores.collision:.0f}%  FS {scores.skating:.0f}%"
+                      f"  ({time.perf_counter() - tick:.0f} s)")  # fmt: skip
+    write_results(rows, families, episodes_per_family, time.perf_counter() - started)
+    throughput_section(ClopsNavCore(ClopsNavConfig(family=families[0], split="test")), bodies=64, actions=3)
+    return 0
+
+
+def write_results(rows: dict[str, dict[str, Scores]], families: tuple[str, ...], count: int, wall: float) -> None:
+    lines = [
+        "# CLOPS scene matrix", "",
+        f"{count} episodes per family (its held-out test seeds {TEST_SEEDS.start}-{TEST_SEEDS.start + count - 1}, one each), "
+        f"15 s each, the same episodes for every row. `motion-envs bench clops` ({wall / 60:.0f} min).",
+        machine_line(), "",
+        "SR: goal within 1 m and in view (%); Col: actions with a collision (%); FS: frames whose lowest foot vertex slid > 0.66 cm (%).",
+        "", "| row | " + " | ".join(f"{f} SR / Col / FS" for f in families) + " | mean SR | mean Col | mean FS |",
+        "|---|" + "---|" * (len(families) + 3),
+    ]  # fmt: skip
+    for label, by_family in rows.items():
+        cells = [f"{s.success:.0f} / {s.collision:.0f} / {s.skating:.0f}" for s in (by_family[f] for f in families if f in by_family)]
+        means = [np.mean([getattr(s, name) for s in by_family.values()]) for name in ("success", "collision", "skating")]
+        lines.append(f"| {label} | " + " | ".join(cells) + " | " + " | ".join(f"{m:.0f}" for m in means) + " |")
+    lines += ["", "The paper (Replica scenes, its own X cm; Table 2 trains and tests on S1):", "", "| row | SR | Col | FS |", "|---|---|---|---|"]
+    lines += [f"| {label} | {sr} | {col} | {fs} |" for label, (sr, col, fs) in PAPER_TABLE2.items()]
+    lines += ["", "The paper's Table 1 (rows: train scene, columns: test scene S1-S5), SR / Col %:", ""]
+    lines += ["| train \\ test | S1 | S2 | S3 | S4 | S5 |", "|---|---|---|---|---|---|"]
+    lines += [f"| S{i + 1} | " + " | ".join(f"{a} / {b}" for a, b in zip(sr, col)) + " |"
+              for i, (sr, col) in enumerate(zip(PAPER_SR_MATRIX, PAPER_COL_MATRIX))]  # fmt: skip
+    text = "\n".join(lines) + "\n"
+    atomic_write(RESULTS / "clops_matrix.md", lambda file: file.write(text.encode()))
+    print(text)
+    figure_of(rows, families)
+
+
+def figure_of(rows: dict[str, dict[str, Scores]], families: tuple[str, ...]) -> None:
+    """Egocentric frames of one DQN episode over its top-down path, and the SR matrix."""
+    learnt = [label for label in rows if label.startswith("CLOPS DQN") and "known" not in label]
+    label = learnt[0] if learnt else next(iter(rows))
+    family = families[0]
+    scores = rows[label][family]
+    frames = scores.views[:8]
+    figure = plt.figure(figsize=(2 * max(len(frames), 4), 6.5))
+    for index, view in enumerate(frames):
+        axis = figure.add_subplot(2, max(len(frames), 4), index + 1)
+        colour = view[1:4].transpose(1, 2, 0).copy()
+        colour[view[4] > 0] = (230, 30, 30)
+        axis.imshow(colour)
+        axis.set_title(f"action {index}", fontsize=8)
+        axis.axis("off")
+    core = ClopsNavCore(ClopsNavConfig(family=family, split="test"))
+    scene = core.slots[core.slot(family, TEST_SEEDS.start)].scene
+    path_axis = figure.add_subplot(2, 2, 3)
+    state = episodes(core, 1)
+    top_down(path_axis, scores.paths[:1], state.goal[:, :2].numpy(), scene, title=f"{label}, {family} test seed {TEST_SEEDS.start}")
+    matrix_axis = figure.add_subplot(2, 2, 4)
+    table = np.array([[rows[name][f].success if f in rows[name] else np.nan for f in families] for name in rows])
+    matrix_axis.imshow(table, vmin=0, vmax=100, cmap="viridis")
+    matrix_axis.set(xticks=range(len(families)), xticklabels=families, yticks=range(len(rows)), yticklabels=list(rows))
+    for (i, j), value in np.ndenumerate(table):
+        matrix_axis.text(j, i, f"{value:.0f}", ha="center", va="center", color="white", fontsize=8)
+    matrix_axis.set_title("SR (%) on held-out seeds")
+    save(figure, RESULTS / "clops_matrix.png")
+
+
+def throughput_section(core: ClopsNavCore, bodies: int, actions: int) -> None:
+    """Measured ClopsNav stepping rate into `throughput.md`."""
+    state = episodes(core, bodies)
+    controller = random_actions(0)
+    tick = time.perf_counter()
+    frames_before = state.frame.sum()
+    for _ in range(actions):
+        state, _ = core.step(state, controller(core, state))
+    seconds = time.perf_counter() - tick
+    frames = int(state.frame.sum() - frames_before)
+    text = (f"ClopsNav-v0 ({core.config.family}, {core.config.width}×{core.config.height} views), {bodies} bodies, "
+            f"{actions} random actions each: {bodies * actions / seconds:.0f} actions/s, {frames / seconds:.0f} "
+            f"body-frames/s (decode, collisions, views). {machine_line()}")  # fmt: skip
+    replace_section(RESULTS / "throughput.md", f"## ClopsNav stepping\n\n{text}\n")

@@ -1,0 +1,524 @@
+"""ClopsNav-v0: find a red sphere in a furnished room by looking, and walk to it by choosing where the head goes.
+
+## Description
+
+CLOPS (Diomataris et al., "Moving by Looking") drives a head-target motion
+prior (`motion_envs.priors.clops`) with a Q-network that sees only the
+body's egocentric view. A body stands in a room of one layout family
+(`motion_envs.scenes.layouts`); a goal sphere floats somewhere in the free
+space of the same room (reachable), seen only through the goal-mask channel.
+Every step the agent picks one of K head-pose deltas (k-means over the
+mocap, stored with the prior); the prior generates frames (30 fps) until
+the head reaches that target pose (10 cm on the ground, 10° of yaw) or
+`max_chunk_frames` have passed, and the body's new egocentric view is the
+next observation. The policy acts about once a second, as the paper's.
+After every frame the lowest foot vertex is kept on the floor (as in
+WandrReach: our small-data prior's height drifts).
+
+## Action Space
+
+`Discrete(K)`, K = 16 with the shipped prior (`prior.actions`: rows of
+dx, dy, dz in the head's yaw frame (m) and dyaw (rad)). Out-of-range or
+non-integer actions raise `ValueError`.
+
+## Observation Space
+
+`Box(0, 255, (5, H, W), uint8)`, channel-first so that SB3's `CnnPolicy`
+takes it (and scales it by 1/255): depth (0-255 over 0-`max_depth` m),
+semantic colour (3, the fixed label palette), goal mask (0 or 255). With
+`known_goal=True` (the paper's "CLOPS + known goal") the observation is a
+`Dict` of that `image` and `goal`: `Box(-inf, inf, (3,), float32)`, the
+goal relative to the head in the head's yaw frame (m) — SB3's
+`MultiInputPolicy`.
+
+## Rewards
+
+`ClopsRewardConfig` (`motion_envs.rewards`), per action, every term in
+`info["reward_terms"]`: −0.1 time, −1 collision (any body sphere deeper
+than `collision_tolerance` in the scene at any checked frame of the chunk),
+−0.5 stay-still (head moved < 10 cm and turned < 10°), +10 goal found (the
+pelvis within `success_distance` of the goal on the ground and any goal
+pixel in view). The paper's constants and its "X cm" were lost from its
+text; `success_distance` = 1 m is ours.
+
+## Starting State
+
+A scene seed drawn from the family's training seeds (the first
+`train_scenes` of `TRAIN_SEEDS`) or its held-out `TEST_SEEDS`
+(`split="test"`); a start and a goal drawn from its walkable region at
+least `min_goal_distance` apart; the body is a shipped start pose turned to
+a random heading; the goal sphere's centre at a height in `goal_height`.
+
+## Episode End
+
+Terminates when the goal is found; truncates after `max_seconds` (15 s =
+450 frames) of generated motion. Collisions never end an episode (as the
+paper).
+
+## Arguments
+
+`gym.make("motion_envs/ClopsNav-v0", **kwargs)` with any field of
+`ClopsNavConfig` (e.g. `family="living"`, `split="test"`, `width=64`,
+`known_goal=True`). `reset(options=...)` takes `scene_seed` (one seed, or
+one per body for the vector env), `start` (x, y), `goal` (x, y, z),
+`facing` (radians) and `start_index`.
+
+## Batched core
+
+`ClopsNavCore` steps N bodies at once (the single env is N = 1): frames are
+decoded for all bodies together, collisions are one signed-distance lookup
+per scene for all checked frames of the chunk, views one ray cast per scene.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+
+from motion_envs.batched import BatchedState, where_bodies
+from motion_envs.body import BodyModel
+from motion_envs.body.collision_spheres import spheres_of_joints
+from motion_envs.body.head_camera import camera_from_head
+from motion_envs.body.rotations import matrix_to_sixd
+from motion_envs.counter_random import counter_normal
+from motion_envs.envs.core import CoreVectorEnv, check_actions, config_from_kwargs
+from motion_envs.envs.starts import StartBodies
+from motion_envs.metrics import WANDR_SKATING_THRESHOLD
+from motion_envs.priors.clops import ClopsPrior, ClopsStepper, action_targets, head_pose, head_yaw
+from motion_envs.priors.train_clops import load_clops
+from motion_envs.priors.wandr_features import FPS, PELVIS, WandrState
+from motion_envs.render.egocentric import EgocentricRenderer
+from motion_envs.render.env_view import EnvView, RenderInputs
+from motion_envs.rewards import ClopsRewardConfig, goal_found, stayed_still
+from motion_envs.scenes.layouts import FAMILIES, TEST_SEEDS, TRAIN_SEEDS, make_scene
+from motion_envs.scenes.scene import Scene
+
+RESET_OPTIONS = ("scene_seed", "start", "goal", "facing", "start_index")
+TERMS = ("time", "collision", "still", "goal")
+
+
+@dataclasses.dataclass(frozen=True)
+class ClopsNavConfig:
+    """Everything that defines a ClopsNav task."""
+
+    family: str = "open"
+    """Scene layout family (`motion_envs.scenes.layouts.FAMILIES`)."""
+    split: str = "train"
+    """'train': the first `train_scenes` training seeds; 'test': the held-out seeds."""
+    train_scenes: int = 64
+    scene_seeds: tuple[int, ...] | None = None
+    """Explicit seeds (overrides `split`)."""
+    reward: ClopsRewardConfig = dataclasses.field(default_factory=ClopsRewardConfig)
+    width: int = 64
+    height: int = 64
+    fov: float = 90.0
+    """Horizontal field of view, degrees (square pixels)."""
+    max_depth: float = 10.0
+    goal_radius: float = 0.25
+    goal_height: tuple[float, float] = (0.8, 1.5)
+    min_goal_distance: float = 2.0
+    success_distance: float = 1.0
+    max_seconds: float = 15.0
+    max_chunk_frames: int = 45
+    latent_scale: float = 0.0
+    """z = latent_scale · ε, ε ~ N(0, I) every frame. The paper samples (1); we decode the prior's mean (0): with
+    our small-data prior, sampling raised foot skating from 44% to 74% of frames and collisions from 23% to 32% of
+    actions under random actions (64 bodies × 15 actions, `open`)."""
+    collision_every: int = 3
+    """Frames between collision checks within a chunk (and its last frame)."""
+    collision_tolerance: float = 0.02
+    """Penetration (m) below which a sphere does not count as colliding (the grid has 5 cm voxels)."""
+    still_distance: float = 0.10
+    still_angle: float = math.radians(10.0)
+    known_goal: bool = False
+    weights: str | None = None
+    """CLOPS prior weights (default: the shipped priors/weights/clops.pt)."""
+    device: str = "cpu"
+
+    def __post_init__(self) -> None:
+        if isinstance(self.reward, str):
+            object.__setattr__(self, "reward", ClopsRewardConfig.named(self.reward))
+        if self.family not in FAMILIES:
+            raise ValueError(f"unknown scene family {self.family!r}; choose from {tuple(FAMILIES)}")
+        if self.split not in ("train", "test"):
+            raise ValueError(f"split must be 'train' or 'test', got {self.split!r}")
+        if self.width < 8 or self.height < 8 or not 0 < self.fov < 180:
+            raise ValueError(f"need width, height >= 8 and 0 < fov < 180, got {self.width}, {self.height}, {self.fov}")
+        if self.max_chunk_frames < 1 or self.max_seconds <= 0 or self.collision_every < 1:
+            raise ValueError("max_chunk_frames, max_seconds and collision_every must be positive")
+        if not 1 <= self.train_scenes <= len(TRAIN_SEEDS):
+            raise ValueError(f"train_scenes must lie in [1, {len(TRAIN_SEEDS)}], got {self.train_scenes}")
+        if self.scene_seeds is not None and len(self.scene_seeds) == 0:
+            raise ValueError("scene_seeds must name at least one seed")
+
+    @property
+    def seeds(self) -> tuple[int, ...]:
+        if self.scene_seeds is not None:
+            return tuple(int(seed) for seed in self.scene_seeds)
+        return tuple(TRAIN_SEEDS[: self.train_scenes]) if self.split == "train" else tuple(TEST_SEEDS)
+
+    @property
+    def max_frames(self) -> int:
+        return round(self.max_seconds * FPS)
+
+
+@dataclasses.dataclass(frozen=True)
+class ClopsNavState(BatchedState):
+    """N bodies' simulation state.
+
+    body: the prior's state as tensors; goal: (N, 3); scene: (N,) index into the core's scene list;
+    noise_key: (N,) int64 key of the body's latent draws; frame / actions / collided: (N,) frames so far,
+    actions taken, actions that collided; lowest_id, lowest_xy: (N,), (N, 2) the lowest foot vertex and
+    where it was; skated: (N,) skating frames; found: (N,) bool; view: (N, 5, H, W) uint8 the current view.
+    """
+
+    transl: torch.Tensor
+    orient: torch.Tensor
+    pose: torch.Tensor
+    previous_delta: torch.Tensor
+    joints: torch.Tensor
+    goal: torch.Tensor
+    scene: torch.Tensor
+    noise_key: torch.Tensor
+    frame: torch.Tensor
+    actions: torch.Tensor
+    collided: torch.Tensor
+    lowest_id: torch.Tensor
+    lowest_xy: torch.Tensor
+    skated: torch.Tensor
+    found: torch.Tensor
+    view: torch.Tensor
+
+    @property
+    def body(self) -> WandrState:
+        return WandrState(self.transl, self.orient, self.pose, self.previous_delta, self.joints)
+
+    @property
+    def distance(self) -> torch.Tensor:
+        """(N,) pelvis-to-goal distance on the ground (m)."""
+        return (self.joints[:, PELVIS, :2] - self.goal[:, :2]).norm(dim=-1)
+
+
+@dataclasses.dataclass(frozen=True)
+class ClopsStepResult:
+    """What one action of N bodies produced; every tensor (N,)."""
+
+    reward: torch.Tensor
+    terms: dict[str, torch.Tensor]
+    terminated: torch.Tensor
+    truncated: torch.Tensor
+    collided: torch.Tensor
+    frames: torch.Tensor
+
+
+class SceneSlot:
+    """A scene with its egocentric renderer."""
+
+    def __init__(self, scene: Scene, config: ClopsNavConfig) -> None:
+        self.scene = scene
+        self.eyes = EgocentricRenderer(scene, config.width, config.height, config.fov, config.max_depth)
+
+
+class ClopsNavCore:
+    """The batched task: start states, one action for N bodies, observations. Stateless: states go in and out."""
+
+    def __init__(self, config: ClopsNavConfig, prior: ClopsPrior | None = None) -> None:
+        self.config = config
+        self.device = torch.device(config.device)
+        self.prior = (prior or load_clops(config.weights)).to(self.device).eval()
+        self.body = BodyModel().to(self.device)
+        self.stepper = ClopsStepper(self.prior, self.body)
+        self.starts = StartBodies(self.stepper, self.device)
+        self.slots: list[SceneSlot] = []
+        self._slot_of: dict[tuple[str, int], int] = {}
+
+    @property
+    def num_actions(self) -> int:
+        return len(self.prior.actions)
+
+    def slot(self, family: str, seed: int) -> int:
+        """Index of the (family, seed) scene in `slots`, building it on first use."""
+        key = (family, int(seed))
+        if key not in self._slot_of:
+            self._slot_of[key] = len(self.slots)
+            self.slots.append(SceneSlot(make_scene(family, int(seed)), self.config))
+        return self._slot_of[key]
+
+    def sample_initial_state(self, rngs: list[np.random.Generator], options: dict[str, Any] | None = None) -> ClopsNavState:
+        """One random episode per generator; `options` (see the module doc) apply to every body."""
+        options = dict(options or {})
+        unknown = set(options) - set(RESET_OPTIONS)
+        if unknown:
+            raise ValueError(f"unknown reset options {sorted(unknown)}; known: {', '.join(RESET_OPTIONS)}")
+        config, seeds = self.config, self.config.seeds
+        slots, starts, goals, facings, rows, keys = [], [], [], [], [], []
+        given_seeds = options.get("scene_seed")
+        if given_seeds is not None and np.ndim(given_seeds) == 1 and len(given_seeds) != len(rngs):
+            raise ValueError(f"scene_seed must be one seed or one per body ({len(rngs)}), got {len(given_seeds)}")
+        for body_index, rng in enumerate(rngs):  # per-body draws from its own generator (a few numbers each)
+            drawn = seeds[int(rng.integers(len(seeds)))]
+            seed = drawn if given_seeds is None else int(given_seeds[body_index] if np.ndim(given_seeds) == 1 else given_seeds)
+            slots.append(self.slot(config.family, seed))
+            scene = self.slots[slots[-1]].scene
+            start, goal = scene.sample_start_goal(rng, config.min_goal_distance)
+            height = rng.uniform(*config.goal_height)
+            starts.append(np.asarray(options.get("start", start), dtype=np.float32))
+            goals.append(np.asarray(options.get("goal", (*goal, height)), dtype=np.float32))
+            facings.append(float(options.get("facing", rng.uniform(-math.pi, math.pi))))
+            rows.append(int(options.get("start_index", rng.integers(len(self.starts)))))
+            keys.append(int(rng.integers(1 << 62)))
+        goal = torch.as_tensor(np.stack(goals), device=self.device)
+        if goal.shape != (len(rngs), 3) or not torch.isfinite(goal).all():
+            raise ValueError(f"goal must be a finite (x, y, z), got {options.get('goal')}")
+        position = torch.as_tensor(np.stack(starts), device=self.device)
+        if position.shape != (len(rngs), 2):
+            raise ValueError(f"start must be an (x, y) position, got {options.get('start')}")
+        body, feet = self.starts.place(torch.tensor(rows), torch.tensor(facings, dtype=torch.float32), position)
+        count, zeros = len(rngs), torch.zeros(len(rngs), dtype=torch.long, device=self.device)
+        lowest_id = feet[..., 2].argmin(dim=-1)
+        scene = torch.tensor(slots, device=self.device)
+        state = ClopsNavState(
+            *body, goal, scene, torch.tensor(keys, device=self.device), zeros, zeros, zeros, lowest_id,
+            feet[torch.arange(count, device=self.device), lowest_id, :2], zeros,
+            torch.zeros(count, dtype=torch.bool, device=self.device), torch.zeros(count, 0, device=self.device),
+        )  # fmt: skip
+        return dataclasses.replace(state, view=self.views(state.body, goal, scene))
+
+    def views(self, body: WandrState, goal: torch.Tensor, scene: torch.Tensor) -> torch.Tensor:
+        """(N, 5, H, W) uint8 egocentric views of bodies from their head cameras, one ray cast per scene."""
+        head = head_pose(body)
+        camera = camera_from_head(head.position, head.rotation)
+        return self.views_from(camera.eye, camera.rotation, goal, scene)
+
+    def views_from(self, eye: torch.Tensor, rotation: torch.Tensor, goal: torch.Tensor, scene: torch.Tensor) -> torch.Tensor:
+        """(N, 5, H, W) uint8 views from cameras eye (N, 3), rotation (N, 3, 3) in the scenes (N,) with goals (N, 3)."""
+        config = self.config
+        views = np.empty((len(goal), 5, config.height, config.width), dtype=np.uint8)
+        for index in torch.unique(scene).tolist():
+            rows = torch.nonzero(scene == index).flatten()
+            raw = self.slots[index].eyes.render(eye[rows], rotation[rows], goal[rows], config.goal_radius)
+            raw[:, 0] /= config.max_depth
+            views[rows.cpu().numpy()] = np.round(np.clip(raw, 0.0, 1.0) * 255.0).astype(np.uint8)
+        return torch.as_tensor(views, device=self.device)
+
+    def goal_visible(self, eye: torch.Tensor, rotation: torch.Tensor, goal: torch.Tensor, scene: torch.Tensor) -> torch.Tensor:
+        """(N,) bool: any goal pixel in the view from cameras eye (N, 3), rotation (N, 3, 3)."""
+        return (self.views_from(eye, rotation, goal, scene)[:, 4] > 0).flatten(1).any(-1)
+
+    def collisions(self, joints: torch.Tensor, scene: torch.Tensor) -> torch.Tensor:
+        """(N,) bool: any collision sphere of bodies with joints (T, N, 22, 3) deeper than the tolerance in its scene."""
+        centres, radii = spheres_of_joints(joints)
+        hit = torch.zeros(joints.shape[1], dtype=torch.bool, device=self.device)
+        for index in torch.unique(scene).tolist():
+            rows = torch.nonzero(scene == index).flatten()
+            depth = self.slots[index].scene.collisions(centres[:, rows], radii)
+            hit[rows] = (depth > self.config.collision_tolerance).flatten(2).any(-1).any(0)
+        return hit
+
+    def goal_in_head_frame(self, state: ClopsNavState) -> torch.Tensor:
+        """(N, 3) the goal relative to the head, in the head's yaw frame (x right, y forward, z up)."""
+        head = head_pose(state.body)
+        yaw = head_yaw(head.rotation)
+        offset = state.goal - head.position
+        cosine, sine = torch.cos(yaw), torch.sin(yaw)
+        return torch.stack([cosine * offset[:, 0] + sine * offset[:, 1], -sine * offset[:, 0] + cosine * offset[:, 1], offset[:, 2]], -1)
+
+    def observe(self, state: ClopsNavState) -> np.ndarray | dict[str, np.ndarray]:
+        """(N, 5, H, W) uint8 views, or with `known_goal` a dict of those (`image`) and the goal (`goal`, (N, 3))."""
+        image = state.view.cpu().numpy()
+        if not self.config.known_goal:
+            return image
+        return {"image": image, "goal": self.goal_in_head_frame(state).cpu().numpy().astype(np.float32)}
+
+    def check_actions(self, actions: torch.Tensor) -> torch.Tensor:
+        """(N,) long action indices from (N,) numbers. Raises ValueError naming the bad ones."""
+        bad = (actions != torch.round(actions)) | (actions < 0) | (actions >= self.num_actions)
+        if bad.any():
+            raise ValueError(f"actions must be integers in [0, {self.num_actions}), got {actions[bad][:5].tolist()}")
+        return actions.long().to(self.device)
+
+    @torch.no_grad()
+    def step(self, state: ClopsNavState, actions: torch.Tensor) -> tuple[ClopsNavState, ClopsStepResult]:
+        """One action per body (N,): frames towards the target head pose until reached (or the chunk's limit)."""
+        config, scales = self.config, self.config.reward
+        actions = self.check_actions(actions)
+        count = state.num_bodies
+        rows = torch.arange(count, device=self.device)
+        start_frame, start_head = state.frame, head_pose(state.body)
+        target = action_targets(start_head, self.prior.actions[actions])
+        body, frame, lowest_id, lowest_xy, skated = state.body, state.frame, state.lowest_id, state.lowest_xy, state.skated
+        active = (frame < config.max_frames) & ~state.found
+        checked = []
+        latent = self.prior.config.latent
+        noise = config.latent_scale * counter_normal(state.noise_key, start_frame, config.max_chunk_frames * latent)
+        for index in range(config.max_chunk_frames):  # autoregressive: frame by frame, all bodies at once
+            z = noise[:, index * latent : (index + 1) * latent]
+            moved, feet = self.stepper.step_towards(body, z, target)
+            body = WandrState(*(where_bodies(active, new, old) for new, old in zip(moved, body)))
+            slide = (feet[rows, lowest_id, :2] - lowest_xy).norm(dim=-1)
+            skated = skated + ((slide > WANDR_SKATING_THRESHOLD) & active).long()
+            new_lowest = feet[..., 2].argmin(dim=-1)
+            lowest_id = where_bodies(active, new_lowest, lowest_id)
+            lowest_xy = where_bodies(active, feet[rows, new_lowest, :2], lowest_xy)
+            frame = frame + active.long()
+            if index % config.collision_every == 0:
+                checked.append(body.joints)
+            active = active & ~self.stepper.reached(body, target) & (frame < config.max_frames)
+            if not active.any():
+                break
+        checked.append(body.joints)
+        collided = self.collisions(torch.stack(checked), state.scene)
+        view = self.views(body, state.goal, state.scene)
+        visible = (view[:, 4] > 0).flatten(1).any(-1)  # the goal in the field of view, not hidden by the scene
+        end_head = head_pose(body)
+        turned = head_yaw(end_head.rotation) - head_yaw(start_head.rotation)
+        turned = torch.atan2(torch.sin(turned), torch.cos(turned))
+        moved_by = (end_head.position[:, :2] - start_head.position[:, :2]).norm(dim=-1)
+        state = dataclasses.replace(state, **body._asdict(), frame=frame, actions=state.actions + 1,
+                                    collided=state.collided + collided.long(), lowest_id=lowest_id, lowest_xy=lowest_xy,
+                                    skated=skated, view=view)  # fmt: skip
+        found = goal_found(state.distance, visible, config.success_distance)
+        state = dataclasses.replace(state, found=found)
+        terms = {"time": torch.ones(count, device=self.device), "collision": collided.float(),
+                 "still": stayed_still(moved_by, turned, config.still_distance, config.still_angle).float(),
+                 "goal": found.float()}  # fmt: skip
+        reward = (scales.goal * terms["goal"] - scales.time * terms["time"] - scales.collision * terms["collision"]
+                  - scales.still * terms["still"])  # fmt: skip
+        truncated = (frame >= config.max_frames) & ~found
+        return state, ClopsStepResult(reward, terms, found, truncated, collided, frame - start_frame)
+
+    @property
+    def goal_marker(self) -> tuple[str, float]:
+        """How third-person renders draw the goal: the sphere the body has to find."""
+        return "sphere", self.config.goal_radius
+
+    def render_inputs(self, state: ClopsNavState) -> RenderInputs:
+        return RenderInputs(state.transl, matrix_to_sixd(state.orient), matrix_to_sixd(state.pose), state.joints[:, PELVIS], state.goal)
+
+    def render_scene(self, state: ClopsNavState) -> Scene:
+        """The scene drawn behind the bodies (the first body's)."""
+        return self.slots[int(state.scene[0])].scene
+
+
+def _spaces(core: ClopsNavCore) -> tuple[gym.spaces.Discrete, gym.spaces.Space]:
+    config = core.config
+    image = gym.spaces.Box(0, 255, (5, config.height, config.width), np.uint8)
+    if not config.known_goal:
+        return gym.spaces.Discrete(core.num_actions), image
+    goal = gym.spaces.Box(-np.inf, np.inf, (3,), np.float32)
+    return gym.spaces.Discrete(core.num_actions), gym.spaces.Dict({"image": image, "goal": goal})
+
+
+def with_view_inset(frame: np.ndarray, view: np.ndarray, scale: int = 2) -> np.ndarray:
+    """The third-person `frame` (H, W, 3) uint8 with an egocentric `view` (5, h, w) uint8 in its top-left corner:
+    semantic colours, goal pixels red, `scale` times enlarged, with a white border."""
+    colour = view[1:4].transpose(1, 2, 0).copy()
+    colour[view[4] > 0] = (230, 30, 30)
+    inset = colour.repeat(scale, axis=0).repeat(scale, axis=1)
+    height, width = min(inset.shape[0], frame.shape[0] - 4), min(inset.shape[1], frame.shape[1] - 4)
+    framed = frame.copy()
+    framed[: height + 4, : width + 4] = 255
+    framed[2 : height + 2, 2 : width + 2] = inset[:height, :width]
+    return framed
+
+
+class ClopsNavEnv(gym.Env):
+    __doc__ = __doc__
+    metadata = {"render_modes": ["rgb_array"], "render_fps": FPS}
+
+    def __init__(self, prior: ClopsPrior | None = None, render_mode: str | None = None, **kwargs: Any) -> None:
+        if render_mode not in (None, *self.metadata["render_modes"]):
+            raise ValueError(f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}")
+        self.render_mode = render_mode
+        self.config = config_from_kwargs(ClopsNavConfig, kwargs, "ClopsNav-v0")
+        self.core = ClopsNavCore(self.config, prior)
+        self.metadata = {**self.metadata, "render_fps": 1}  # one frame per action (about a second of motion)
+        self.action_space, self.observation_space = _spaces(self.core)
+        self.state: ClopsNavState | None = None
+        self.trail: list[np.ndarray] = []
+        self._view: EnvView | None = None
+        self._view_scene: Scene | None = None
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        super().reset(seed=seed)
+        self.state = self.core.sample_initial_state([self.np_random], options)
+        self.trail = [self._pelvis()]
+        scene = self.core.render_scene(self.state)
+        return self._observation(), {"goal": self.state.goal[0].cpu().numpy(), "scene": scene.name,
+                                     "distance": float(self.state.distance[0])}  # fmt: skip
+
+    def step(self, action: int | np.ndarray):
+        if self.state is None:
+            raise RuntimeError("call reset() before step()")
+        index = check_actions(action, (), batch=None)
+        self.state, result = self.core.step(self.state, torch.as_tensor(index).reshape(1))
+        self.trail.append(self._pelvis())
+        return (self._observation(), float(result.reward[0]), bool(result.terminated[0]), bool(result.truncated[0]),
+                _step_info(self.state, result, 0))  # fmt: skip
+
+    def render(self) -> np.ndarray | None:
+        """rgb_array: the body in its room with the goal sphere and the pelvis trail; the egocentric view inset."""
+        if self.render_mode is None or self.state is None:
+            return None
+        scene = self.core.render_scene(self.state)
+        if self._view is None or self._view_scene is not scene:
+            self._view, self._view_scene = EnvView(self.core.body, *self.core.goal_marker, max_bodies=1, scene=scene), scene
+        frame = self._view.frame(self.core.render_inputs(self.state), [np.array(self.trail)])
+        return with_view_inset(frame, self.state.view[0].cpu().numpy())
+
+    def _pelvis(self) -> np.ndarray:
+        return self.state.joints[0, PELVIS].cpu().numpy()
+
+    def _observation(self) -> np.ndarray | dict[str, np.ndarray]:
+        observation = self.core.observe(self.state)
+        if isinstance(observation, dict):
+            return {key: value[0] for key, value in observation.items()}
+        return observation[0]
+
+
+def _step_info(state: ClopsNavState, result: ClopsStepResult, index: int) -> dict[str, Any]:
+    actions = max(int(state.actions[index]), 1)
+    info: dict[str, Any] = {
+        "reward_terms": {name: float(value[index]) for name, value in result.terms.items()},
+        "distance": float(state.distance[index]),
+        "frames": int(state.frame[index]),
+        "chunk_frames": int(result.frames[index]),
+        "collided": bool(result.collided[index]),
+        "collision_rate": float(state.collided[index]) / actions,
+        "foot_skating": float(state.skated[index]) / max(int(state.frame[index]), 1),
+    }
+    if result.terminated[index] or result.truncated[index]:
+        info["is_success"] = bool(state.found[index])
+    return info
+
+
+class ClopsNavVectorEnv(CoreVectorEnv):
+    """N bodies in one batched core (each in its own room); same-step autoreset (see `CoreVectorEnv`).
+    Renders draw the first `render_bodies` bodies (default 1) in the first body's room, with its view inset."""
+
+    def __init__(self, num_envs: int = 1, prior: ClopsPrior | None = None, render_mode: str | None = None,
+                 render_bodies: int = 1, **kwargs: Any) -> None:  # fmt: skip
+        self.config = config_from_kwargs(ClopsNavConfig, kwargs, "ClopsNav-v0")
+        core = ClopsNavCore(self.config, prior)
+        super().__init__(core, num_envs, *_spaces(core), render_mode, render_bodies)
+        self.metadata = {**self.metadata, "render_fps": 1}
+
+    def render(self) -> np.ndarray | None:
+        frame = super().render()
+        return None if frame is None else with_view_inset(frame, self.state.view[0].cpu().numpy())
+
+    def _step_info(self, result: ClopsStepResult) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        state = self.state
+        info = {"distance": state.distance.cpu().numpy(), "collided": result.collided.cpu().numpy(),
+                "reward_terms": {name: value.cpu().numpy() for name, value in result.terms.items()}}  # fmt: skip
+        done = (result.terminated | result.truncated).cpu().numpy()
+        final = {"is_success": state.found.cpu().numpy() & done,
+                 "collision_rate": (state.collided.float() / state.actions.clamp_min(1).float()).cpu().numpy(),
+                 "foot_skating": (state.skated.float() / state.frame.clamp_min(1).float()).cpu().numpy(),
+                 "frames": state.frame.cpu().numpy(), "actions": state.actions.cpu().numpy()}  # fmt: skip
+        return info, final

@@ -1,0 +1,217 @@
+"""CLOPS: head-target prior and action clusters, ClopsNav-v0, double DQN with prioritised replay."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+from gymnasium.utils.env_checker import check_env
+
+import motion_envs  # noqa: F401  (registers the ids)
+from agents.double_dqn import PrioritizedDoubleDQN
+from agents.prioritized_replay import PriorityLedger
+from motion_envs.envs.clops_nav import ClopsNavConfig, ClopsNavCore
+from motion_envs.priors.clops import HeadPose, action_targets, head_deltas, head_pose, head_rotation
+from motion_envs.priors.train_clops import ClopsTrainConfig, fit_head_actions, load_clops, train_clops
+from motion_envs.priors.train_wandr import WandrClips
+from motion_envs.rewards import ClopsRewardConfig, goal_found, stayed_still
+from motion_envs.scenes.labels import LABELS
+
+ENV_ID = "motion_envs/ClopsNav-v0"
+SEEDS = (1000,)  # one held-out open room keeps the tests' scene builds to one
+
+
+@pytest.fixture(scope="module")
+def core() -> ClopsNavCore:
+    return ClopsNavCore(ClopsNavConfig(scene_seeds=SEEDS))
+
+
+def test_head_rotation_matches_forward_kinematics(body, generator):
+    import roma
+
+    orient, pose = roma.random_rotmat(3, generator=generator), roma.random_rotmat((3, 21), generator=generator)
+    posed = body.from_matrices(torch.zeros(3, 3), orient, pose)
+    assert torch.allclose(head_rotation(orient, pose), posed.rotations[:, 15], atol=1e-5)
+
+
+def test_action_targets_invert_head_deltas(generator):
+    import roma
+
+    yaw = torch.tensor([0.3, -2.0])
+    rotation = roma.rotvec_to_rotmat(torch.stack([torch.zeros(2), torch.zeros(2), yaw], 1))
+    head = HeadPose(torch.randn(2, 3, generator=generator), rotation)
+    deltas = torch.tensor([[0.2, 1.0, 0.0, 0.4], [-0.5, 0.1, 0.05, -1.0]])
+    assert torch.allclose(head_deltas(head, action_targets(head, deltas)), deltas, atol=1e-5)
+
+
+def test_kmeans_actions_are_reproducible_for_a_seed(walking_motion_30fps, body):
+    clips = WandrClips.from_motions([walking_motion_30fps], body)
+    first, again = fit_head_actions(clips, 30, 6, seed=3), fit_head_actions(clips, 30, 6, seed=3)
+    assert first.shape == (6, 4) and np.array_equal(first, again)
+    assert first[0, 1] == first[:, 1].max()  # sorted: the most forward first
+    assert first[0, 1] > 0.5  # a walking clip: the head travels over half a metre a second
+
+
+def test_a_tiny_clops_training_run_lowers_its_loss(walking_motion_30fps, body, tmp_path):
+    clips = WandrClips.from_motions([walking_motion_30fps], body)
+    config = ClopsTrainConfig(epochs=5, batch_size=16, window_stride=1, max_rollout=1, init=None, run_dir=tmp_path / "run",
+                              weights=tmp_path / "clops.pt")  # fmt: skip
+    config.model = dataclasses.replace(config.model, layers=3, max_width=64, actions=4)
+    entry = train_clops(config, clips, clips)
+    assert entry["train_loss_by_epoch"][-1] < entry["train_loss_by_epoch"][0]
+    prior = load_clops(tmp_path / "clops.pt")
+    assert prior.actions.shape == (4, 4) and prior.actions.abs().sum() > 0  # the action set travels with the weights
+
+
+def test_the_prior_moves_the_head_towards_a_target_half_a_metre_ahead(core):
+    state = core.sample_initial_state([np.random.default_rng(0)], {"facing": 0.0})
+    head = head_pose(state.body)
+    target = action_targets(head, torch.tensor([[0.0, 0.5, 0.0, 0.0]]))
+    start_distance = float((head.position[0, :2] - target.position[0, :2]).norm())
+    body = state.body
+    with torch.no_grad():
+        for _ in range(45):
+            body, _ = core.stepper.step_towards(body, torch.zeros(1, 64), target)
+            if core.stepper.reached(body, target).all():
+                break
+    distance = float((head_pose(body).position[0, :2] - target.position[0, :2]).norm())
+    assert start_distance == pytest.approx(0.5, abs=1e-4)
+    assert distance < 0.2, f"head still {distance:.2f} m from a target 0.5 m ahead after 1.5 s"
+
+
+def test_spaces_and_check_env():
+    env = gym.make(ENV_ID, scene_seeds=SEEDS)
+    check_env(env.unwrapped, skip_render_check=True)
+    assert isinstance(env.action_space, gym.spaces.Discrete) and env.action_space.n == 16
+    assert env.observation_space.shape == (5, 64, 64) and env.observation_space.dtype == np.uint8
+    known = gym.make(ENV_ID, scene_seeds=SEEDS, known_goal=True)
+    observation, _ = known.reset(seed=0)
+    assert set(observation) == {"image", "goal"} and observation["goal"].shape == (3,)
+    check_env(known.unwrapped, skip_render_check=True)
+
+
+def test_reward_term_functions_on_hand_computed_cases():
+    moved, turned = torch.tensor([0.05, 0.3, 0.05]), torch.tensor([0.0, 0.0, 0.5])
+    assert stayed_still(moved, turned, 0.1, math.radians(10)).tolist() == [True, False, False]
+    assert goal_found(torch.tensor([0.5, 0.5, 2.0]), torch.tensor([True, False, True]), 1.0).tolist() == [True, False, False]
+    assert ClopsRewardConfig.named("default:collision=2").collision == 2.0
+
+
+def _least_moving_action(core: ClopsNavCore) -> int:
+    actions = core.prior.actions
+    return int((actions[:, :2].norm(dim=1) + actions[:, 3].abs()).argmin())
+
+
+def test_goal_in_view_pays_and_goal_behind_does_not(core):
+    state = core.sample_initial_state([np.random.default_rng(1)])
+    head = head_pose(state.body)
+    rest = _least_moving_action(core)
+    found = {}
+    for name, ahead in (("front", 0.7), ("behind", -0.7)):
+        goal = action_targets(head, torch.tensor([[0.0, ahead, 0.0, 0.0]])).position
+        placed = dataclasses.replace(state, goal=goal)
+        _, result = core.step(placed, torch.tensor([rest]))
+        found[name] = (bool(result.terminated[0]), float(result.terms["goal"][0]), float(result.reward[0]))
+    assert found["front"][:2] == (True, 1.0)
+    assert found["behind"][:2] == (False, 0.0)
+    terms_front = found["front"][2] - found["behind"][2]
+    assert terms_front == pytest.approx(10.0, abs=1e-4)  # the same action, only the goal term differs
+
+
+def test_a_body_inside_furniture_collides_and_pays_for_it(core):
+    scene = core.slots[core.slot("open", SEEDS[0])].scene
+    piece = next(p for p in scene.parts if LABELS[p.label] not in ("floor", "wall"))
+    centre = piece.mesh.bounds.mean(axis=0)
+    rest = _least_moving_action(core)
+    inside = core.sample_initial_state([np.random.default_rng(2)], {"start": centre[:2].tolist()})
+    free = core.sample_initial_state([np.random.default_rng(2)])
+    _, hit = core.step(inside, torch.tensor([rest]))
+    _, clear = core.step(free, torch.tensor([rest]))
+    assert bool(hit.collided[0]) and not bool(clear.collided[0])
+    scales = core.config.reward
+    expected = -scales.time - scales.collision - scales.still * float(hit.terms["still"][0])
+    assert float(hit.reward[0]) == pytest.approx(expected, abs=1e-5)
+
+
+def test_vector_env_equals_single_envs_and_renders():
+    single = [gym.make(ENV_ID, scene_seeds=SEEDS) for _ in range(2)]
+    vector = gym.make_vec(ENV_ID, num_envs=2, vectorization_mode="vector_entry_point", scene_seeds=SEEDS, render_mode="rgb_array")
+    batch, _ = vector.reset(seed=5)
+    for index, env in enumerate(single):
+        observation, _ = env.reset(seed=5 + index)
+        assert np.array_equal(observation, batch[index])
+    actions = np.array([0, 7])
+    batch, rewards, *_ = vector.step(actions)
+    for index, env in enumerate(single):
+        observation, reward, *_ = env.step(int(actions[index]))
+        assert np.array_equal(observation, batch[index]) and reward == pytest.approx(rewards[index], abs=1e-5)
+    frame = vector.render()
+    assert frame.dtype == np.uint8 and frame.shape == (360, 480, 3)
+
+
+def test_out_of_range_actions_raise_clear_errors():
+    env = gym.make(ENV_ID, scene_seeds=SEEDS)
+    env.reset(seed=0)
+    for bad in (16, -1, 2.5, float("nan")):
+        with pytest.raises(ValueError, match="action"):
+            env.step(bad)
+    with pytest.raises(TypeError, match="unknown arguments"):
+        gym.make(ENV_ID, resolution=32)
+
+
+def test_prioritised_replay_samples_high_priority_transitions_more_often():
+    ledger = PriorityLedger(buffer_size=100, n_envs=1, alpha=0.6)
+    for row in range(100):
+        ledger.added(row)
+    ledger.update(np.arange(100), np.zeros(100, dtype=int), np.full(100, 0.1))
+    ledger.update(np.array([7]), np.array([0]), np.array([10.0]))  # one transition with a large TD error
+    rng = np.random.default_rng(0)
+    rows, _, weights = ledger.sample(20_000, 100, beta=0.4, rng=rng)
+    share = np.mean(rows == 7)
+    expected = 10.0**0.6 / (10.0**0.6 + 99 * 0.1**0.6)  # P(i) = p_i^α / Σ p^α
+    assert share == pytest.approx(expected, rel=0.1) and share > 10 / 100
+    assert weights[rows == 7].max() < weights[rows != 7].min()  # importance weights undo the over-sampling
+
+
+class _TwoArmedBandit(gym.Env):
+    """Action 1 pays 1, action 0 pays 0; one-step episodes on a constant image."""
+
+    observation_space = gym.spaces.Box(0, 255, (5, 36, 36), np.uint8)
+    action_space = gym.spaces.Discrete(2)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        return np.full((5, 36, 36), 128, dtype=np.uint8), {}
+
+    def step(self, action):
+        return np.full((5, 36, 36), 128, dtype=np.uint8), float(action), True, False, {}
+
+
+def test_a_tiny_dqn_run_learns_the_better_arm_and_saves(tmp_path):
+    model = PrioritizedDoubleDQN("CnnPolicy", _TwoArmedBandit(), learning_starts=20, buffer_size=500, batch_size=16,
+                                 train_freq=1, gradient_steps=1, target_update_interval=20, exploration_fraction=0.5,
+                                 learning_rate=1e-3, seed=0, device="cpu")  # fmt: skip
+    model.learn(300)
+    observation = np.full((1, 5, 36, 36), 128, dtype=np.uint8)
+    q_values = model.q_net(torch.as_tensor(observation)).detach()[0]
+    assert q_values[1] > q_values[0] + 0.3
+    model.save(tmp_path / "dqn.zip")
+    loaded = PrioritizedDoubleDQN.load(tmp_path / "dqn.zip", device="cpu")
+    assert loaded.predict(observation[0], deterministic=True)[0] == 1
+    assert type(loaded.replay_buffer).__name__ == "PrioritizedReplayBuffer"
+
+
+def test_a_tiny_dqn_run_on_clops_nav(tmp_path):
+    from agents.vec_env import NativeVecEnv
+
+    venv = NativeVecEnv.make(ENV_ID, num_envs=2, scene_seeds=SEEDS, max_seconds=3.0)
+    model = PrioritizedDoubleDQN("CnnPolicy", venv, learning_starts=8, buffer_size=100, batch_size=8, train_freq=1,
+                                 gradient_steps=1, seed=0, device="cpu")  # fmt: skip
+    model.learn(24)
+    assert model.num_timesteps >= 24 and model.replay_buffer.size() >= 12
+    actions, _ = model.predict(venv.reset(), deterministic=True)
+    assert actions.shape == (2,) and ((0 <= actions) & (actions < 16)).all()

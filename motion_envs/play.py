@@ -11,7 +11,10 @@ final distance, contact score (GAMMA Eq. 11) and foot skating (WANDR's, 0.2 m/s)
 live.
 WandrReach-v0 episodes (30 fps) use a saved policy or WANDR's own sampler
 (`--baseline sampler`, the default there) and report success, frames, the
-final and closest wrist distance and foot skating.
+final and closest wrist distance and foot skating. ClopsNav-v0 episodes use a
+saved DQN policy or random actions and report success, frames, the final
+goal distance, collision rate and foot skating; the video shows every frame
+with the egocentric view after each action inset.
 """
 
 from __future__ import annotations
@@ -33,7 +36,7 @@ from motion_envs.render.third_person import ThirdPersonRenderer
 from motion_envs.rollout import Rollout, RolloutRecorder
 
 BASELINES = ("random", "greedy-reward", "greedy-distance")
-GAMMA_ID, WANDR_ID = "motion_envs/GammaReach-v0", "motion_envs/WandrReach-v0"
+GAMMA_ID, WANDR_ID, CLOPS_ID = "motion_envs/GammaReach-v0", "motion_envs/WandrReach-v0", "motion_envs/ClopsNav-v0"
 
 
 def controller_for(policy: Path | None, baseline: str | None, seed: int) -> Callable:
@@ -70,8 +73,16 @@ def play(env_id: str, policy: Path | None = None, baseline: str | None = None, v
         env = GammaReachEnv(**env_kwargs)
         controller = controller_for(policy, baseline, seed)
         fps, run = GAMMA_FPS, _episode
+    elif env_id == CLOPS_ID:
+        if search is not None:
+            raise ValueError(f"--search needs a primitive-level env (GammaReach-v0), not {CLOPS_ID}")
+        from motion_envs.envs.clops_nav import ClopsNavEnv
+
+        env = ClopsNavEnv(render_mode="rgb_array" if video is not None else None, **env_kwargs)
+        controller = clops_controller(policy, baseline, seed)
+        fps, run = env.metadata["render_fps"] * 30, _clops_episode
     else:
-        raise ValueError(f"play supports {GAMMA_ID} and {WANDR_ID}, got {env_id!r}")
+        raise ValueError(f"play supports {GAMMA_ID}, {WANDR_ID} and {CLOPS_ID}, got {env_id!r}")
     recorder = RolloutRecorder(fps, *env.core.goal_marker, env_id=env_id) if save_rollout else None
     writer = imageio.get_writer(str(video), fps=fps / every, macro_block_size=8) if video else None
     summaries = []
@@ -204,3 +215,40 @@ def _wandr_episode(env, controller: Callable, writer, seed: int, every: int, sea
     return {"seed": seed, "success": bool(info["is_success"]), "frames": info["frames"],
             "final_distance": round(info["distance"], 3), "closest": round(info["closest_distance"], 3),
             "foot_skating": round(info["foot_skating"], 3)}  # fmt: skip
+
+
+def clops_controller(policy: Path | None, baseline: str | None, seed: int) -> Callable:
+    """`(env, observation) -> action`: a saved ClopsNav DQN policy, or uniformly random actions (the default)."""
+    if baseline not in (None, "random"):
+        raise ValueError(f"unknown baseline {baseline!r} for {CLOPS_ID}; choose from ('random',)")
+    if policy is not None:
+        from agents.double_dqn import PrioritizedDoubleDQN
+
+        model = PrioritizedDoubleDQN.load(policy, device="cpu")
+        return lambda env, observation: int(model.predict(observation, deterministic=True)[0])
+    generator = np.random.default_rng(seed)
+    return lambda env, observation: int(generator.integers(env.action_space.n))
+
+
+def _clops_episode(env, controller: Callable, writer, seed: int, every: int, search: int | None,
+                   recorder: RolloutRecorder | None) -> dict:  # fmt: skip
+    """A ClopsNav episode; the video gets every generated frame (30 fps / `every`) with the view after each action."""
+    observation, _ = env.reset(seed=seed)
+    env.keep_frames = writer is not None or recorder is not None
+    trail = [env.trail[0]]
+    info: dict = {}
+    for _ in range(10_000):
+        observation, _, terminated, truncated, info = env.step(controller(env, observation))
+        view = env.state.view[0].cpu().numpy()
+        for index, body in enumerate(env.last_frames):
+            trail.append(body.joints[0, PELVIS].cpu().numpy())
+            if recorder is not None:
+                recorder.add(body.transl, body.orient, body.pose, env.state.goal)
+            if writer is not None and index % every == 0:
+                writer.append_data(env.render_body(body, view, np.array(trail)))
+        if terminated or truncated:
+            break
+    return {"seed": seed, "success": bool(info["is_success"]), "frames": info["frames"],
+            "final_distance": round(info["distance"], 3), "collision_rate": round(info["collision_rate"], 3),
+            "foot_skating": round(info["foot_skating"], 3)}  # fmt: skip
+

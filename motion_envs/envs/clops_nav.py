@@ -52,8 +52,10 @@ a random heading; the goal sphere's centre at a height in `goal_height`.
 ## Episode End
 
 Terminates when the goal is found; truncates after `max_seconds` (15 s =
-450 frames) of generated motion. Collisions never end an episode (as the
-paper).
+450 frames) of generated motion, or when the pelvis has left the room
+(`room_margin` outside the walkable rectangle; ours: the prior is
+kinematic and walks through walls). Collisions never end an episode (as
+the paper).
 
 ## Arguments
 
@@ -135,6 +137,10 @@ class ClopsNavConfig:
     """Penetration (m) below which a sphere does not count as colliding (the grid has 5 cm voxels)."""
     still_distance: float = 0.10
     still_angle: float = math.radians(10.0)
+    room_margin: float = 0.5
+    """An episode is truncated (failed) once the pelvis is more than this (m) outside the walkable region's
+    rectangle: the prior is kinematic, so walls stop nothing, and a body that walked out of the room would
+    otherwise see only the void for the rest of its episode (collision-free, a place to hide)."""
     known_goal: bool = False
     weights: str | None = None
     """CLOPS prior weights (default: the shipped priors/weights/clops.pt)."""
@@ -214,6 +220,9 @@ class ClopsStepResult:
     truncated: torch.Tensor
     collided: torch.Tensor
     frames: torch.Tensor
+    left_room: torch.Tensor
+    trajectory: list[WandrState] | None = None
+    """With `keep_frames`: the bodies after every generated frame of the chunk (frozen bodies repeat)."""
 
 
 class SceneSlot:
@@ -222,6 +231,7 @@ class SceneSlot:
     def __init__(self, scene: Scene, config: ClopsNavConfig) -> None:
         self.scene = scene
         self.eyes = EgocentricRenderer(scene, config.width, config.height, config.fov, config.max_depth)
+        self.bounds = torch.as_tensor(scene.walkable_bounds, dtype=torch.float32)
 
 
 class ClopsNavCore:
@@ -320,6 +330,13 @@ class ClopsNavCore:
             hit[rows] = (depth > self.config.collision_tolerance).flatten(2).any(-1).any(0)
         return hit
 
+    def left_room(self, state: ClopsNavState) -> torch.Tensor:
+        """(N,) bool: the pelvis more than `room_margin` outside its scene's walkable rectangle."""
+        bounds = torch.stack([self.slots[index].bounds for index in state.scene.tolist()]).to(self.device)
+        margin = self.config.room_margin
+        pelvis = state.joints[:, PELVIS, :2]
+        return ((pelvis < bounds[:, :2] - margin) | (pelvis > bounds[:, 2:] + margin)).any(-1)
+
     def goal_in_head_frame(self, state: ClopsNavState) -> torch.Tensor:
         """(N, 3) the goal relative to the head, in the head's yaw frame (x right, y forward, z up)."""
         head = head_pose(state.body)
@@ -343,8 +360,9 @@ class ClopsNavCore:
         return actions.long().to(self.device)
 
     @torch.no_grad()
-    def step(self, state: ClopsNavState, actions: torch.Tensor) -> tuple[ClopsNavState, ClopsStepResult]:
-        """One action per body (N,): frames towards the target head pose until reached (or the chunk's limit)."""
+    def step(self, state: ClopsNavState, actions: torch.Tensor, keep_frames: bool = False) -> tuple[ClopsNavState, ClopsStepResult]:
+        """One action per body (N,): frames towards the target head pose until reached (or the chunk's limit).
+        `keep_frames`: the result also holds every generated frame (for videos and the viewer)."""
         config, scales = self.config, self.config.reward
         actions = self.check_actions(actions)
         count = state.num_bodies
@@ -353,7 +371,7 @@ class ClopsNavCore:
         target = action_targets(start_head, self.prior.actions[actions])
         body, frame, lowest_id, lowest_xy, skated = state.body, state.frame, state.lowest_id, state.lowest_xy, state.skated
         active = (frame < config.max_frames) & ~state.found
-        checked = []
+        checked, trajectory = [], []
         latent = self.prior.config.latent
         noise = config.latent_scale * counter_normal(state.noise_key, start_frame, config.max_chunk_frames * latent)
         for index in range(config.max_chunk_frames):  # autoregressive: frame by frame, all bodies at once
@@ -366,6 +384,8 @@ class ClopsNavCore:
             lowest_id = where_bodies(active, new_lowest, lowest_id)
             lowest_xy = where_bodies(active, feet[rows, new_lowest, :2], lowest_xy)
             frame = frame + active.long()
+            if keep_frames:
+                trajectory.append(body)
             if index % config.collision_every == 0:
                 checked.append(body.joints)
             active = active & ~self.stepper.reached(body, target) & (frame < config.max_frames)
@@ -389,8 +409,9 @@ class ClopsNavCore:
                  "goal": found.float()}  # fmt: skip
         reward = (scales.goal * terms["goal"] - scales.time * terms["time"] - scales.collision * terms["collision"]
                   - scales.still * terms["still"])  # fmt: skip
-        truncated = (frame >= config.max_frames) & ~found
-        return state, ClopsStepResult(reward, terms, found, truncated, collided, frame - start_frame)
+        left = self.left_room(state)
+        truncated = ((frame >= config.max_frames) | left) & ~found
+        return state, ClopsStepResult(reward, terms, found, truncated, collided, frame - start_frame, left, trajectory if keep_frames else None)
 
     @property
     def goal_marker(self) -> tuple[str, float]:
@@ -443,6 +464,9 @@ class ClopsNavEnv(gym.Env):
         self.trail: list[np.ndarray] = []
         self._view: EnvView | None = None
         self._view_scene: Scene | None = None
+        self.keep_frames = False
+        """Set True to keep every generated frame of the last action in `last_frames` (videos, the viewer)."""
+        self.last_frames: list[WandrState] = []
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
@@ -456,7 +480,8 @@ class ClopsNavEnv(gym.Env):
         if self.state is None:
             raise RuntimeError("call reset() before step()")
         index = check_actions(action, (), batch=None)
-        self.state, result = self.core.step(self.state, torch.as_tensor(index).reshape(1))
+        self.state, result = self.core.step(self.state, torch.as_tensor(index).reshape(1), self.keep_frames)
+        self.last_frames = result.trajectory or []
         self.trail.append(self._pelvis())
         return (self._observation(), float(result.reward[0]), bool(result.terminated[0]), bool(result.truncated[0]),
                 _step_info(self.state, result, 0))  # fmt: skip
@@ -465,11 +490,16 @@ class ClopsNavEnv(gym.Env):
         """rgb_array: the body in its room with the goal sphere and the pelvis trail; the egocentric view inset."""
         if self.render_mode is None or self.state is None:
             return None
+        return self.render_body(self.state.body, self.state.view[0].cpu().numpy(), np.array(self.trail))
+
+    def render_body(self, body: WandrState, view: np.ndarray, trail: np.ndarray) -> np.ndarray:
+        """A frame of `body` (one frame of the current episode, e.g. from `last_frames`) with an egocentric `view`
+        (5, H, W) inset and a pelvis `trail` (T, 3)."""
         scene = self.core.render_scene(self.state)
         if self._view is None or self._view_scene is not scene:
             self._view, self._view_scene = EnvView(self.core.body, *self.core.goal_marker, max_bodies=1, scene=scene), scene
-        frame = self._view.frame(self.core.render_inputs(self.state), [np.array(self.trail)])
-        return with_view_inset(frame, self.state.view[0].cpu().numpy())
+        inputs = RenderInputs(body.transl, matrix_to_sixd(body.orient), matrix_to_sixd(body.pose), body.joints[:, PELVIS], self.state.goal)
+        return with_view_inset(self._view.frame(inputs, [trail]), view)
 
     def _pelvis(self) -> np.ndarray:
         return self.state.joints[0, PELVIS].cpu().numpy()
@@ -489,6 +519,7 @@ def _step_info(state: ClopsNavState, result: ClopsStepResult, index: int) -> dic
         "frames": int(state.frame[index]),
         "chunk_frames": int(result.frames[index]),
         "collided": bool(result.collided[index]),
+        "left_room": bool(result.left_room[index]),
         "collision_rate": float(state.collided[index]) / actions,
         "foot_skating": float(state.skated[index]) / max(int(state.frame[index]), 1),
     }
@@ -515,6 +546,7 @@ class ClopsNavVectorEnv(CoreVectorEnv):
     def _step_info(self, result: ClopsStepResult) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         state = self.state
         info = {"distance": state.distance.cpu().numpy(), "collided": result.collided.cpu().numpy(),
+                "left_room": result.left_room.cpu().numpy(),
                 "reward_terms": {name: value.cpu().numpy() for name, value in result.terms.items()}}  # fmt: skip
         done = (result.terminated | result.truncated).cpu().numpy()
         final = {"is_success": state.found.cpu().numpy() & done,

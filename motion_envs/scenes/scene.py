@@ -67,6 +67,14 @@ class Scene:
         sizes = ndimage.sum(free, components, index=np.arange(1, count + 1))
         return components == 1 + int(np.argmax(sizes))
 
+    @cached_property
+    def walkable_bounds(self) -> np.ndarray:
+        """(4,) x0, y0, x1, y1: the rectangle (m) around the walkable region."""
+        cells = np.argwhere(self.walkable)
+        low = self.grid.origin[:2] + cells.min(axis=0) * self.grid.pitch
+        high = self.grid.origin[:2] + (cells.max(axis=0) + 1) * self.grid.pitch
+        return np.concatenate([low, high])
+
     def sample_free(self, rng: np.random.Generator, count: int) -> np.ndarray:
         """(count, 2) xy positions drawn uniformly over the walkable region."""
         cells = np.argwhere(self.walkable)

@@ -106,9 +106,9 @@ def _view(args: argparse.Namespace) -> int:
     if (args.rollout is None) == (args.env is None):
         print("motion-envs view: give a rollout file or --env (live), not both", file=sys.stderr)
         return 2
-    scene = _scene_argument(args.scene, args.scene_file)
     live = LiveEpisodes(args.env, args.policy, args.baseline, args.seed) if args.env else None
     rollout = Rollout.load(args.rollout) if args.rollout else live.more()
+    scene = _scene_argument(args.scene or rollout.scene or None, args.scene_file)  # a ClopsNav rollout names its room
     viewer = RolloutViewer(rollout, scene, host=args.host, port=args.port, extend=None if live is None else live.more)
     print(f"viewer on http://{args.host}:{args.port} (Ctrl-C to stop)")
     try:
@@ -464,7 +464,7 @@ def parser() -> argparse.ArgumentParser:
     view.add_argument("--policy", type=Path, default=None, help="live: a saved PPOKL policy (.zip)")
     view.add_argument("--baseline", default=None, help="live: a baseline name (as `play`)")
     view.add_argument("--seed", type=int, default=0)
-    view.add_argument("--scene", default=None, metavar="FAMILY:SEED", help="show a procedural room, e.g. living:3")
+    view.add_argument("--scene", default=None, metavar="FAMILY:SEED", help="show a procedural room, e.g. living:3 (default: the rollout's own, if it names one)")
     view.add_argument("--scene-file", type=Path, default=None, help="show a scene file (any trimesh format)")
     view.add_argument("--host", default="127.0.0.1", help="bind address (default 127.0.0.1: this machine only)")
     view.add_argument("--port", type=int, default=8080)

@@ -235,6 +235,8 @@ def _clops_episode(env, controller: Callable, writer, seed: int, every: int, sea
     """A ClopsNav episode; the video gets every generated frame (30 fps / `every`) with the view after each action."""
     observation, _ = env.reset(seed=seed)
     env.keep_frames = writer is not None or recorder is not None
+    if recorder is not None:  # the viewer rebuilds the room from "family:seed" (the last episode's room)
+        recorder.scene = ":".join(env.core.render_scene(env.state).name.rsplit("-", 1))
     trail = [env.trail[0]]
     info: dict = {}
     for _ in range(10_000):

@@ -215,3 +215,18 @@ def test_a_tiny_dqn_run_on_clops_nav(tmp_path):
     assert model.num_timesteps >= 24 and model.replay_buffer.size() >= 12
     actions, _ = model.predict(venv.reset(), deterministic=True)
     assert actions.shape == (2,) and ((0 <= actions) & (actions < 16)).all()
+
+
+def test_play_writes_every_frame_of_a_clops_episode(tmp_path):
+    import imageio.v2 as imageio
+
+    from motion_envs.play import play
+    from motion_envs.rollout import Rollout
+
+    video, rollout = tmp_path / "clops.mp4", tmp_path / "clops.npz"
+    summary = play(ENV_ID, video=video, every=1, save_rollout=rollout, scene_seeds=SEEDS, max_seconds=2.0)[0]
+    assert set(summary) >= {"success", "frames", "collision_rate", "foot_skating"}
+    saved = Rollout.load(rollout)
+    assert saved.scene == f"open:{SEEDS[0]}" and len(saved.transl) == summary["frames"]
+    frames = imageio.get_reader(str(video)).count_frames()
+    assert summary["frames"] - 1 <= frames <= summary["frames"]  # every generated frame (the writer may drop one)

@@ -4,6 +4,8 @@ GammaReach-v0: one episode of the shipped α = 1 PPO policy (seed 3), four
 frames of its ray-cast video side by side -> `docs/gamma_reach.png`.
 WandrReach-v0: the shipped PPO policy reaching a goal 2 m ahead and to the
 left at chest height (seed 0) -> `docs/wandr_reach.png`.
+ClopsNav-v0: the shipped DQN policy (trained on `open`) in a held-out open
+room, the egocentric view after each action inset -> `docs/clops_nav.png`.
 Scenes: the first held-out room of each layout family seen from above with a
 body and its goal, and under it what the body's head camera sees (semantic
 colours, depth, goal mask at 64 × 64, shown 2×) -> `docs/scenes.png`.
@@ -32,16 +34,17 @@ from motion_envs.scenes import FAMILIES, TEST_SEEDS, make_scene
 DOCS = Path(__file__).resolve().parent.parent / "docs"
 POLICY = WEIGHTS_DIR / "ppo_gammareach_alpha1_paper.zip"
 WANDR_POLICY = WEIGHTS_DIR / "ppo_wandrreach_alpha1_default.zip"
+CLOPS_POLICY = WEIGHTS_DIR / "dqn_clopsnav_open.zip"
 
 
-def episode_strip(env_id: str, destination: Path, seed: int, **play_kwargs) -> Path:
-    """Four frames of one played episode side by side, half size."""
+def episode_strip(env_id: str, destination: Path, seed: int, crop: tuple[int, int] = (40, 40), **play_kwargs) -> Path:
+    """Four frames of one played episode side by side, half size, `crop` rows cut from the top and bottom."""
     with tempfile.TemporaryDirectory() as folder:
         video = Path(folder) / "episode.mp4"
         (summary,) = play(env_id, video=video, seed=seed, **play_kwargs)
         frames = iio.imread(video)
     picks = np.linspace(0, len(frames) - 1, 4).round().astype(int)
-    strip = np.concatenate([frames[i, 40:-40] for i in picks], axis=1)[::2, ::2]
+    strip = np.concatenate([frames[i, crop[0] : len(frames[i]) - crop[1]] for i in picks], axis=1)[::2, ::2]
     print(f"{env_id}: {summary}")
     return atomic_write(destination, lambda file: iio.imwrite(file, strip, extension=".png"))
 
@@ -53,6 +56,10 @@ def gamma_reach_strip(destination: Path = DOCS / "gamma_reach.png", seed: int = 
 def wandr_reach_strip(destination: Path = DOCS / "wandr_reach.png", seed: int = 0) -> Path:
     return episode_strip("motion_envs/WandrReach-v0", destination, seed, policy=WANDR_POLICY, goal_angle=(0.6, 0.6),
                          goal_height=(1.2, 1.2), goal_distance=(2.0, 2.0))  # fmt: skip
+
+
+def clops_nav_strip(destination: Path = DOCS / "clops_nav.png", seed: int = 1) -> Path:
+    return episode_strip("motion_envs/ClopsNav-v0", destination, seed, crop=(0, 60), policy=CLOPS_POLICY, split="test")
 
 
 def scene_tile(family: str, body: BodyModel, seed: int = TEST_SEEDS[0]) -> np.ndarray:
@@ -90,4 +97,5 @@ def scenes_picture(destination: Path = DOCS / "scenes.png") -> Path:
 if __name__ == "__main__":
     print(gamma_reach_strip())
     print(wandr_reach_strip())
+    print(clops_nav_strip())
     print(scenes_picture())

@@ -197,8 +197,6 @@ def _train(args: argparse.Namespace) -> int:
         return _train_clops(args)
     if args.what == "dqn":
         return _train_dqn(args)
-    if args.what != "gamma":
-        return _not_yet(f"train {args.what}")(args)
     stages = {"predictor": _train_gamma_predictor, "regressor": _train_gamma_regressor, "pose-vae": _train_gamma_pose_vae,
               "g-cvae": _train_gamma_g_cvae}  # fmt: skip
     if args.stage not in stages:
@@ -337,14 +335,6 @@ def _train_gamma_pose_vae(args: argparse.Namespace, dataset, common: dict) -> di
     return train_pose_vae(_train_config(PoseVAETrainConfig, common), poses("train", True), poses("validation", False))
 
 
-def _not_yet(what: str):
-    def run(_: argparse.Namespace) -> int:
-        print(f"motion-envs {what}: not available yet (it arrives with its environment)", file=sys.stderr)
-        return 2
-
-    return run
-
-
 def _add_data_args(parser: argparse.ArgumentParser, default_subsets: list[str] | None) -> None:
     parser.add_argument("--mocap-dir", type=Path, default=None, help="mocap folder (default: $MOTION_ENVS_DATA or ../shared/mocap)")
     parser.add_argument("--cache-dir", type=Path, default=None, help="cache folder (default: $MOTION_ENVS_CACHE or ~/.cache/motion_envs)")
@@ -369,7 +359,7 @@ def parser() -> argparse.ArgumentParser:
     starts.set_defaults(run=_data_start_poses)
 
     train = commands.add_parser("train", help="train a prior or a policy (resumable: rerun the same command)")
-    train.add_argument("what", help="gamma | ppo | wandr | clops | dqn")
+    train.add_argument("what", choices=("gamma", "ppo", "wandr", "clops", "dqn"), help="what to train")
     train.add_argument("--stage", default="predictor", help="gamma: predictor | regressor | pose-vae | g-cvae")
     train.add_argument("--seed-frames", type=int, default=2, choices=(1, 2), help="predictor: seed frames")
     train.add_argument("--epochs", type=int, default=None, help="epochs (predictor: single-primitive epochs)")

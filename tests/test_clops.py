@@ -68,19 +68,17 @@ def test_a_tiny_clops_training_run_lowers_its_loss(walking_motion_30fps, body, t
 
 
 def test_the_prior_moves_the_head_towards_a_target_half_a_metre_ahead(core):
-    state = core.sample_initial_state([np.random.default_rng(0)], {"facing": 0.0})
+    count = len(core.starts)  # every shipped start pose, each facing a random way
+    state = core.sample_initial_state([np.random.default_rng(seed) for seed in range(count)])
     head = head_pose(state.body)
-    target = action_targets(head, torch.tensor([[0.0, 0.5, 0.0, 0.0]]))
-    start_distance = float((head.position[0, :2] - target.position[0, :2]).norm())
+    target = action_targets(head, torch.tensor([[0.0, 0.5, 0.0, 0.0]]).expand(count, 4))
     body = state.body
     with torch.no_grad():
-        for _ in range(45):
-            body, _ = core.stepper.step_towards(body, torch.zeros(1, 64), target)
-            if core.stepper.reached(body, target).all():
-                break
-    distance = float((head_pose(body).position[0, :2] - target.position[0, :2]).norm())
-    assert start_distance == pytest.approx(0.5, abs=1e-4)
-    assert distance < 0.2, f"head still {distance:.2f} m from a target 0.5 m ahead after 1.5 s"
+        for _ in range(45):  # 1.5 s, the env's chunk limit
+            body, _ = core.stepper.step_towards(body, torch.zeros(count, 64), target)
+    distance = (head_pose(body).position[:, :2] - target.position[:, :2]).norm(dim=-1)
+    assert (distance < 0.5).float().mean() >= 0.9, "the head should come closer to its target for nearly every start"
+    assert distance.median() < 0.25, f"median head-to-target distance {distance.median():.2f} m after 1.5 s (from 0.5 m)"
 
 
 def test_spaces_and_check_env():

@@ -34,9 +34,9 @@ def test_cli_help_lists_the_subcommands():
         assert command in result.stdout
 
 
-def test_cli_reports_unfinished_subcommands_clearly():
+def test_cli_reports_unknown_training_targets_clearly():
     result = subprocess.run(
-        [sys.executable, "-m", "motion_envs.cli", "train", "clops"], capture_output=True, text=True, timeout=60
+        [sys.executable, "-m", "motion_envs.cli", "train", "clop"], capture_output=True, text=True, timeout=60
     )
     assert result.returncode == 2
-    assert "not available yet" in result.stderr
+    assert "invalid choice: 'clop'" in result.stderr and "dqn" in result.stderr

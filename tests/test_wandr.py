@@ -160,19 +160,20 @@ def test_sampler_reaches_a_goal_just_in_front_of_the_wrist(shipped):
     assert (final.closest < 0.25).all()  # every wrist came closer than the 0.3 m it started at
 
 
-def test_latent_optimisation_brings_the_wrist_closer():
+def test_latent_optimisation_brings_the_wrist_closer(shipped):
+    # The shipped prior: with an untrained one the 6-frame objective was chaotic (a 1e-7 change in forward
+    # kinematics flipped the outcome, and a smaller step size made it worse).
     torch.manual_seed(0)
-    prior = WandrPrior(WandrConfig(layers=2, max_width=32)).eval()  # untrained: the gradient path is what is tested
-    core = WandrReachCore(WandrReachConfig(max_frames=6), prior)
+    core = WandrReachCore(WandrReachConfig(max_frames=10), shipped)
     state = core.initial_state(torch.tensor([0, 1]), torch.zeros(2), torch.zeros(2, 1, 3))
     goal = state.joints[:, RIGHT_WRIST] + torch.tensor([0.0, 0.4, 0.1])
     state = core.initial_state(torch.tensor([0, 1]), torch.zeros(2), goal[:, None])
-    initial = torch.zeros(2, 6, 64)
-    settings = LatentOptimisationSettings(steps=15, learning_rate=0.3)
-    latents = optimise_latents(core.stepper, state, 6, initial, settings)
+    initial = torch.zeros(2, 10, 64)
+    settings = LatentOptimisationSettings(steps=15, learning_rate=0.1)
+    latents = optimise_latents(core.stepper, state, 10, initial, settings)
     before = roll_out(core, state, LatentSequence(initial))
     after = roll_out(core, state, LatentSequence(latents))
-    assert (after.distance < before.distance - 0.01).all()
+    assert (after.distance < before.distance - 0.05).all()
     with pytest.raises(ValueError, match="initial latents"):
         optimise_latents(core.stepper, state, 5, initial, settings)
 

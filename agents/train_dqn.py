@@ -18,19 +18,17 @@ ours are sized for two CPU cores (documented on each field).
 from __future__ import annotations
 
 import json
-import shutil
 import sys
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import torch
 from stable_baselines3.common.vec_env import VecMonitor
 
 from agents.double_dqn import PrioritizedDoubleDQN
-from agents.train_ppo import CurveCallback, plot_curve
+from agents.train_ppo import CurveCallback, ship_policy
 from agents.vec_env import NativeVecEnv
-from motion_envs.atomic import atomic_write
-from motion_envs.priors.training import WEIGHTS_DIR, record_in_manifest
+from motion_envs.priors.training import WEIGHTS_DIR
 
 
 @dataclass
@@ -99,15 +97,4 @@ def train_dqn(config: DQNTrainConfig) -> dict:
     if remaining > 0:
         model.learn(total_timesteps=remaining, callback=callback, reset_num_timesteps=False, progress_bar=True)
         callback.save()
-    weights = config.weights_path()
-    best = max(curve, key=lambda point: point["success_rate"]) if curve else None
-    if best is not None and (config.run_dir / "best.zip").exists():
-        shutil.copyfile(config.run_dir / "best.zip", weights)
-    else:
-        atomic_write(weights, model.save)
-    entry = {"kind": "dqn_policy", "config": {k: str(v) if isinstance(v, Path) else v for k, v in asdict(config).items()},
-             "timesteps": int(model.num_timesteps), "curve": curve, "torch": str(torch.__version__),
-             "shipped": f"best window: {best['timesteps']} steps" if best else "last"}  # fmt: skip
-    record_in_manifest(weights, entry)
-    plot_curve(curve, config.run_dir / "curve.png", steps_label="env steps (actions)")
-    return entry
+    return ship_policy(model, config, curve, "dqn_policy", steps_label="env steps (actions)")

@@ -20,6 +20,7 @@ import sys
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
@@ -171,19 +172,26 @@ def train_ppo(config: PPOTrainConfig, clone_from: GoalWindows | None = None) -> 
     if remaining > 0:
         model.learn(total_timesteps=remaining, callback=callback, reset_num_timesteps=False, progress_bar=True)
         callback.save()
+    extra = {"cloning": json.loads(cloning_path.read_text())} if cloning_path.exists() else {}
+    return ship_policy(model, config, curve, "ppo_policy", best=config.ship == "best", **extra)
+
+
+def ship_policy(model: Any, config: Any, curve: list[dict], kind: str, best: bool = True,
+                steps_label: str = "env steps (primitives)", **extra: Any) -> dict:  # fmt: skip
+    """Copy the run's best-window checkpoint (or save the last model) to `config.weights_path()`, record a
+    manifest entry (kind, config, steps, curve, `extra`) and plot the curve; returns the entry."""
     weights = config.weights_path()
-    best = max(curve, key=lambda point: point["success_rate"]) if curve else None
-    if config.ship == "best" and best is not None:
+    top = max(curve, key=lambda point: point["success_rate"]) if curve else None
+    shipped_best = best and top is not None and (config.run_dir / "best.zip").exists()
+    if shipped_best:
         shutil.copyfile(config.run_dir / "best.zip", weights)
     else:
         atomic_write(weights, model.save)
-    entry = {"kind": "ppo_policy", "config": {k: str(v) if isinstance(v, Path) else v for k, v in asdict(config).items()},
+    entry = {"kind": kind, "config": {k: str(v) if isinstance(v, Path) else v for k, v in asdict(config).items()},
              "timesteps": int(model.num_timesteps), "curve": curve, "torch": str(torch.__version__),
-             "shipped": f"best window: {best['timesteps']} steps" if config.ship == "best" and best else "last"}  # fmt: skip
-    if cloning_path.exists():
-        entry["cloning"] = json.loads(cloning_path.read_text())
+             "shipped": f"best window: {top['timesteps']} steps" if shipped_best else "last", **extra}  # fmt: skip
     record_in_manifest(weights, entry)
-    plot_curve(curve, config.run_dir / "curve.png")
+    plot_curve(curve, config.run_dir / "curve.png", steps_label)
     return entry
 
 

@@ -8,6 +8,24 @@ WANDR_SKATING_THRESHOLD = 2.0 / 3.0 * 0.01
 """WANDR's FS threshold: 0.66 cm between consecutive frames at 30 fps (0.2 m/s)."""
 
 
+def lowest_foot(feet: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """The lowest of each body's foot vertices (N, V, 3): its index (N,) and ground position (N, 2)."""
+    index = feet[..., 2].argmin(dim=-1)
+    return index, feet[torch.arange(len(feet), device=feet.device), index, :2]
+
+
+def track_skating(feet: torch.Tensor, lowest_id: torch.Tensor, lowest_xy: torch.Tensor,
+                  active: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:  # fmt: skip
+    """One frame of WANDR's FS, streamed: did the vertex that was lowest (`lowest_id` (N,), at `lowest_xy` (N, 2))
+    slide more than the threshold to this frame's feet (N, V, 3)? Returns skated (N,) bool (False where not
+    `active`) and the new lowest vertex and position (kept where not `active`)."""
+    rows = torch.arange(len(feet), device=feet.device)
+    slide = (feet[rows, lowest_id, :2] - lowest_xy).norm(dim=-1)
+    index, xy = lowest_foot(feet)
+    keep = active[:, None]
+    return (slide > WANDR_SKATING_THRESHOLD) & active, torch.where(active, index, lowest_id), torch.where(keep, xy, lowest_xy)
+
+
 def skating_threshold(fps: float) -> float:
     """WANDR's FS threshold at another frame rate: the same 0.2 m/s, in metres per frame."""
     return WANDR_SKATING_THRESHOLD * 30.0 / fps

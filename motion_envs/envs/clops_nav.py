@@ -90,7 +90,7 @@ from motion_envs.body.rotations import matrix_to_sixd
 from motion_envs.counter_random import counter_normal
 from motion_envs.envs.core import CoreVectorEnv, check_actions, config_from_kwargs
 from motion_envs.envs.starts import StartBodies
-from motion_envs.metrics import WANDR_SKATING_THRESHOLD
+from motion_envs.metrics import lowest_foot, track_skating
 from motion_envs.priors.clops import ClopsPrior, ClopsStepper, action_targets, head_pose, head_yaw
 from motion_envs.priors.train_clops import load_clops
 from motion_envs.priors.wandr_features import FPS, PELVIS, WandrState
@@ -290,11 +290,10 @@ class ClopsNavCore:
             raise ValueError(f"start must be an (x, y) position, got {options.get('start')}")
         body, feet = self.starts.place(torch.tensor(rows), torch.tensor(facings, dtype=torch.float32), position)
         count, zeros = len(rngs), torch.zeros(len(rngs), dtype=torch.long, device=self.device)
-        lowest_id = feet[..., 2].argmin(dim=-1)
+        lowest_id, lowest_xy = lowest_foot(feet)
         scene = torch.tensor(slots, device=self.device)
         state = ClopsNavState(
-            *body, goal, scene, torch.tensor(keys, device=self.device), zeros, zeros, zeros, lowest_id,
-            feet[torch.arange(count, device=self.device), lowest_id, :2], zeros,
+            *body, goal, scene, torch.tensor(keys, device=self.device), zeros, zeros, zeros, lowest_id, lowest_xy, zeros,
             torch.zeros(count, dtype=torch.bool, device=self.device), torch.zeros(count, 0, device=self.device),
         )  # fmt: skip
         return dataclasses.replace(state, view=self.views(state.body, goal, scene))
@@ -366,7 +365,6 @@ class ClopsNavCore:
         config, scales = self.config, self.config.reward
         actions = self.check_actions(actions)
         count = state.num_bodies
-        rows = torch.arange(count, device=self.device)
         start_frame, start_head = state.frame, head_pose(state.body)
         target = action_targets(start_head, self.prior.actions[actions])
         body, frame, lowest_id, lowest_xy, skated = state.body, state.frame, state.lowest_id, state.lowest_xy, state.skated
@@ -378,11 +376,8 @@ class ClopsNavCore:
             z = noise[:, index * latent : (index + 1) * latent]
             moved, feet = self.stepper.step_towards(body, z, target)
             body = WandrState(*(where_bodies(active, new, old) for new, old in zip(moved, body)))
-            slide = (feet[rows, lowest_id, :2] - lowest_xy).norm(dim=-1)
-            skated = skated + ((slide > WANDR_SKATING_THRESHOLD) & active).long()
-            new_lowest = feet[..., 2].argmin(dim=-1)
-            lowest_id = where_bodies(active, new_lowest, lowest_id)
-            lowest_xy = where_bodies(active, feet[rows, new_lowest, :2], lowest_xy)
+            slid, lowest_id, lowest_xy = track_skating(feet, lowest_id, lowest_xy, active)
+            skated = skated + slid.long()
             frame = frame + active.long()
             if keep_frames:
                 trajectory.append(body)

@@ -93,7 +93,7 @@ from motion_envs.body import BodyModel
 from motion_envs.body.rotations import matrix_to_sixd
 from motion_envs.envs.core import CoreVectorEnv, check_actions, config_from_kwargs
 from motion_envs.envs.starts import StartBodies
-from motion_envs.metrics import WANDR_SKATING_THRESHOLD
+from motion_envs.metrics import lowest_foot, track_skating
 from motion_envs.priors.train_wandr import load_wandr
 from motion_envs.priors.wandr import WandrPrior, WandrStepper
 from motion_envs.priors.wandr_features import FPS, PELVIS, RIGHT_WRIST, WandrState, heading
@@ -223,8 +223,7 @@ class WandrReachCore:
         goals = goals.to(self.device, torch.float32)
         count = len(start_index)
         body, feet = self.starts.place(start_index, facing)
-        lowest_id = feet[..., 2].argmin(dim=-1)
-        rows = torch.arange(count, device=self.device)
+        lowest_id, lowest_xy = lowest_foot(feet)
         goal_count = torch.ones(count, dtype=torch.long, device=self.device) if goal_count is None else goal_count.to(self.device)
         goal_time = torch.full((count,), -1, dtype=torch.long, device=self.device) if goal_time is None else goal_time.to(self.device)
         velocity = torch.zeros(count, 3, device=self.device) if goal_velocity is None else goal_velocity.to(self.device, torch.float32)
@@ -232,7 +231,7 @@ class WandrReachCore:
         distance = (body.joints[:, RIGHT_WRIST] - goals[:, 0]).norm(dim=-1)
         return WandrReachState(
             *body, goals, zeros, goal_count, velocity, goal_time, self._deadline(zeros, goal_time), zeros, distance, distance,
-            lowest_id, feet[rows, lowest_id, :2], zeros, (distance <= self.config.success_radius) & (goal_count == 1),
+            lowest_id, lowest_xy, zeros, (distance <= self.config.success_radius) & (goal_count == 1),
         )  # fmt: skip
 
     def _deadline(self, frame: torch.Tensor, goal_time: torch.Tensor) -> torch.Tensor:
@@ -311,8 +310,7 @@ class WandrReachCore:
             goals = state.goals.clone()
             goals[rows, state.goal_index] += state.goal_velocity / FPS
             distance = (body.joints[:, RIGHT_WRIST] - goals[rows, state.goal_index]).norm(dim=-1)
-            slide = (feet[rows, state.lowest_id, :2] - state.lowest_xy).norm(dim=-1)
-            skated = (slide > WANDR_SKATING_THRESHOLD) & active
+            skated, lowest_id, lowest_xy = track_skating(feet, state.lowest_id, state.lowest_xy, active)
             arrived = (distance <= config.success_radius) & active
             last = state.goal_index >= state.goal_count - 1
             advance = arrived & ~last
@@ -321,7 +319,6 @@ class WandrReachCore:
             terms["success"] += (arrived & last).float()
             terms["skating"] += skated.float()
             distance_now = (body.joints[:, RIGHT_WRIST] - goals[rows, goal_index]).norm(dim=-1)
-            lowest_id = feet[..., 2].argmin(dim=-1)
             moved = WandrState(*(where_bodies(active, new, old) for new, old in zip(body, state.body)))  # done bodies stay
             state = dataclasses.replace(
                 state, **moved._asdict(), goals=goals, goal_index=goal_index,
@@ -329,8 +326,7 @@ class WandrReachCore:
                 frame=where_bodies(active, frame, state.frame),
                 distance=where_bodies(active, distance_now, state.distance),
                 closest=torch.where(advance, distance_now, where_bodies(active, torch.minimum(state.closest, distance_now), state.closest)),
-                lowest_id=where_bodies(active, lowest_id, state.lowest_id),
-                lowest_xy=where_bodies(active, feet[rows, lowest_id, :2], state.lowest_xy),
+                lowest_id=lowest_id, lowest_xy=lowest_xy,
                 skated=state.skated + skated.long(), reached=state.reached | (arrived & last),
             )  # fmt: skip
         terms["latent"] = latent_cost(z)

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import json
 import pickle
-import shutil
 import sys
 import time
 from dataclasses import asdict, dataclass, field
@@ -178,15 +177,16 @@ def train_ppo(config: PPOTrainConfig, clone_from: GoalWindows | None = None) -> 
 
 def ship_policy(model: Any, config: Any, curve: list[dict], kind: str, best: bool = True,
                 steps_label: str = "env steps (primitives)", **extra: Any) -> dict:  # fmt: skip
-    """Copy the run's best-window checkpoint (or save the last model) to `config.weights_path()`, record a
-    manifest entry (kind, config, steps, curve, `extra`) and plot the curve; returns the entry."""
+    """Write the run's best-window checkpoint (or the last model) to `config.weights_path()` without its optimiser
+    state, record a manifest entry (kind, config, steps, curve, `extra`) and plot the curve; returns the entry."""
     weights = config.weights_path()
     top = max(curve, key=lambda point: point["success_rate"]) if curve else None
     shipped_best = best and top is not None and (config.run_dir / "best.zip").exists()
-    if shipped_best:
-        shutil.copyfile(config.run_dir / "best.zip", weights)
-    else:
-        atomic_write(weights, model.save)
+    chosen = type(model).load(config.run_dir / "best.zip", device="cpu") if shipped_best else model
+    optimiser = chosen.policy.optimizer  # shipped without Adam's moments: half the size (runs/ keeps them to resume)
+    parameters = [parameter for group in optimiser.param_groups for parameter in group["params"]]
+    chosen.policy.optimizer = type(optimiser)(parameters, **optimiser.defaults)
+    atomic_write(weights, chosen.save)
     entry = {"kind": kind, "config": {k: str(v) if isinstance(v, Path) else v for k, v in asdict(config).items()},
              "timesteps": int(model.num_timesteps), "curve": curve, "torch": str(torch.__version__),
              "shipped": f"best window: {top['timesteps']} steps" if shipped_best else "last", **extra}  # fmt: skip

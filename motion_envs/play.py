@@ -99,17 +99,26 @@ def play(env_id: str, policy: Path | None = None, baseline: str | None = None, v
 
 class LiveEpisodes:
     """Episodes played on demand for the live viewer: `more()` returns the frames of the next steps (about
-    one second of motion), starting a new episode (next seed) when one ends."""
+    one second of motion), starting a new episode (next seed) when one ends. ClopsNav episodes all play in
+    one held-out room (test seed 1000 + `seed`), the one the viewer shows."""
 
     def __init__(self, env_id: str, policy: Path | None = None, baseline: str | None = None, seed: int = 0) -> None:
-        if env_id not in (GAMMA_ID, WANDR_ID):
-            raise ValueError(f"the live viewer supports {GAMMA_ID} and {WANDR_ID}, got {env_id!r}")
+        if env_id not in (GAMMA_ID, WANDR_ID, CLOPS_ID):
+            raise ValueError(f"the live viewer supports {GAMMA_ID}, {WANDR_ID} and {CLOPS_ID}, got {env_id!r}")
         self.env_id, self.seed = env_id, seed
-        wandr = env_id == WANDR_ID
-        self.env = _wandr_env(False, {}) if wandr else GammaReachEnv()
-        self.controller = wandr_controller(policy, baseline, seed) if wandr else controller_for(policy, baseline, seed)
-        self.fps = self.env.metadata["render_fps"] if wandr else GAMMA_FPS
-        self.env.reset(seed=seed)
+        if env_id == CLOPS_ID:
+            from motion_envs.envs.clops_nav import ClopsNavEnv
+            from motion_envs.scenes.layouts import TEST_SEEDS
+
+            self.env = ClopsNavEnv(split="test", scene_seeds=(TEST_SEEDS[0] + seed,))
+            self.env.keep_frames = True
+            self.controller = clops_controller(policy, baseline, seed)
+        elif env_id == WANDR_ID:
+            self.env, self.controller = _wandr_env(False, {}), wandr_controller(policy, baseline, seed)
+        else:
+            self.env, self.controller = GammaReachEnv(), controller_for(policy, baseline, seed)
+        self.fps = GAMMA_FPS if env_id == GAMMA_ID else 30
+        self.observation, _ = self.env.reset(seed=seed)
         self.done = False
 
     def more(self) -> Rollout:
@@ -117,19 +126,29 @@ class LiveEpisodes:
         while len(recorder) < self.fps:
             if self.done:
                 self.seed += 1
-                self.env.reset(seed=self.seed)
-            _, _, terminated, truncated, _ = self.env.step(self.controller(self.env.core, self.env.state)[0].numpy())
+                self.observation, _ = self.env.reset(seed=self.seed)
+            if self.env_id == CLOPS_ID:
+                action = self.controller(self.env, self.observation)
+                recorder.scene = ":".join(self.env.core.render_scene(self.env.state).name.rsplit("-", 1))
+            else:
+                action = self.controller(self.env.core, self.env.state)[0].numpy()
+            self.observation, _, terminated, truncated, _ = self.env.step(action)
             _record_step(self.env, recorder)
             self.done = terminated or truncated
         return recorder.rollout()
 
 
 def _record_step(env, recorder: RolloutRecorder) -> None:
-    """Add the frames the env's last step generated (GammaReach: a primitive's new frames; WandrReach: one)."""
+    """Add the frames the env's last step generated (GammaReach: a primitive's new frames; WandrReach: one;
+    ClopsNav: the action's whole chunk)."""
     if isinstance(env, GammaReachEnv):
         primitive, goal = env.last_primitive, env.state.goal[:1]
         for frame in torch.nonzero(primitive.new_frames()[0]).flatten().tolist():
             recorder.add(primitive.transl[:1, frame], primitive.global_orient[:1, frame], primitive.body_pose[:1, frame], goal)
+        return
+    if hasattr(env, "last_frames"):  # ClopsNav: every frame of the action's chunk
+        for body in env.last_frames:
+            recorder.add(body.transl, body.orient, body.pose, env.state.goal)
         return
     inputs = env.core.render_inputs(env.state)
     recorder.add(inputs.transl, inputs.global_orient, inputs.body_pose, inputs.goal)
@@ -242,10 +261,10 @@ def _clops_episode(env, controller: Callable, writer, seed: int, every: int, sea
     for _ in range(10_000):
         observation, _, terminated, truncated, info = env.step(controller(env, observation))
         view = env.state.view[0].cpu().numpy()
+        if recorder is not None:
+            _record_step(env, recorder)
         for index, body in enumerate(env.last_frames):
             trail.append(body.joints[0, PELVIS].cpu().numpy())
-            if recorder is not None:
-                recorder.add(body.transl, body.orient, body.pose, env.state.goal)
             if writer is not None and index % every == 0:
                 writer.append_data(env.render_body(body, view, np.array(trail)))
         if terminated or truncated:

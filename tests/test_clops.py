@@ -228,3 +228,12 @@ def test_play_writes_every_frame_of_a_clops_episode(tmp_path):
     assert saved.scene == f"open:{SEEDS[0]}" and len(saved.transl) == summary["frames"]
     frames = imageio.get_reader(str(video)).count_frames()
     assert summary["frames"] - 1 <= frames <= summary["frames"]  # every generated frame (the writer may drop one)
+
+
+def test_live_episodes_feed_the_viewer_clops_frames_in_one_room():
+    from motion_envs.play import LiveEpisodes
+
+    live = LiveEpisodes(ENV_ID, seed=0)
+    first, second = live.more(), live.more()
+    assert len(first.transl) >= 30 and len(second.transl) >= 30  # about a second of 30 fps frames each
+    assert first.scene == second.scene == "open:1000"

@@ -28,9 +28,8 @@ from motion_envs.body.head_camera import head_camera
 from motion_envs.body.markers import foot_vertex_ids
 from motion_envs.envs.clops_nav import ClopsNavCore, ClopsNavState
 from motion_envs.envs.gamma_reach import GammaReachConfig, GammaReachCore
-from motion_envs.metrics import WANDR_SKATING_THRESHOLD
+from motion_envs.metrics import foot_skating, skating_threshold
 from motion_envs.priors.clops import head_yaw
-from motion_envs.priors.wandr_features import FPS as WANDR_FPS
 
 PRIMITIVES_PER_SECOND = 4
 GAMMA_FPS = 40
@@ -61,7 +60,7 @@ def gamma_navigate(clops: ClopsNavCore, episodes: ClopsNavState, policy, max_sec
     wanted_yaw = head_yaw(episodes.orient)
     state = gamma.initial_state(rows, wanted_yaw - own_yaw, episodes.goal[:, :2] - start)
     feet_ids = foot_vertex_ids()
-    threshold = WANDR_SKATING_THRESHOLD * WANDR_FPS / GAMMA_FPS
+    threshold = skating_threshold(GAMMA_FPS)
     found = torch.zeros(count, dtype=torch.bool)
     seconds = torch.zeros(count, dtype=torch.long)
     collided_seconds = torch.zeros(count, dtype=torch.long)
@@ -82,7 +81,7 @@ def gamma_navigate(clops: ClopsNavCore, episodes: ClopsNavState, policy, max_sec
         posed = gamma.body(primitive.transl[:, new], primitive.global_orient[:, new], primitive.body_pose[:, new])
         feet = gamma.body.skin(posed, feet_ids)  # (N, F, V, 3)
         chain = feet if last_feet is None else torch.cat([last_feet[:, None], feet], dim=1)
-        slid = _slides(chain) > threshold  # (N, F or F - 1)
+        slid = foot_skating(chain, threshold)  # (N, F or F - 1)
         skated += (slid.sum(1) * alive).long()
         frames += (slid.shape[1] * alive).long()
         last_feet = feet[:, -1]
@@ -106,11 +105,3 @@ def _rotations(gamma: GammaReachCore, rows: torch.Tensor) -> torch.Tensor:
     """(N, 3, 3) pelvis rotations of GammaReach start rows."""
     posed = gamma.body(gamma.start_transl[rows], gamma.start_orient[rows], gamma.start_pose[rows])
     return posed.rotations[:, 0]
-
-
-def _slides(feet: torch.Tensor) -> torch.Tensor:
-    """(N, F - 1) ground distance moved by the lowest foot vertex of each frame to the next, feet (N, F, V, 3)."""
-    lowest = feet[:, :-1, :, 2].argmin(dim=-1)[..., None, None].expand(-1, -1, 1, 2)
-    before = torch.gather(feet[:, :-1, :, :2], 2, lowest).squeeze(2)
-    after = torch.gather(feet[:, 1:, :, :2], 2, lowest).squeeze(2)
-    return (after - before).norm(dim=-1)

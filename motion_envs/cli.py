@@ -214,17 +214,27 @@ def _train(args: argparse.Namespace) -> int:
     return 0
 
 
-def _train_wandr(args: argparse.Namespace) -> int:
+def _delta_prior_clips(args: argparse.Namespace):
+    """The 30 fps dataset of `--subset` (cache built from the mocap folder if missing) and its training clips
+    (mirrored too) and validation clips, as WANDR's and CLOPS's priors train on them."""
     from motion_envs.body import BodyModel
     from motion_envs.data.build import build
     from motion_envs.data.dataset import MotionDataset
-    from motion_envs.priors.train_wandr import WandrClips, WandrTrainConfig, default_weights, train_wandr
-    from motion_envs.priors.wandr import WandrConfig
+    from motion_envs.priors.train_wandr import WandrClips
     from motion_envs.priors.wandr_features import FPS
 
-    subsets = tuple(dict.fromkeys(args.subset))  # `--subset hdm05` adds to the default cmu
-    dataset = MotionDataset.load(build(mocap_dir=args.mocap_dir, cache_dir=args.cache_dir, subsets=subsets,
+    dataset = MotionDataset.load(build(mocap_dir=args.mocap_dir, cache_dir=args.cache_dir, subsets=tuple(dict.fromkeys(args.subset)),
                                        fps_list=(FPS,)).caches[FPS])  # fmt: skip
+    body = BodyModel()
+    return dataset, WandrClips.from_dataset(dataset, "train", body, mirrored=True), WandrClips.from_dataset(dataset, "validation", body)
+
+
+def _train_wandr(args: argparse.Namespace) -> int:
+    from motion_envs.priors.train_wandr import WandrTrainConfig, default_weights, train_wandr
+    from motion_envs.priors.wandr import WandrConfig
+
+    subsets = tuple(dict.fromkeys(args.subset))  # `--subset hdm05` adds to the default cmu
+    dataset, train_clips, validation_clips = _delta_prior_clips(args)
     intentions = tuple(args.intentions.split(",")) if args.intentions else WandrConfig().intentions
     model = WandrConfig(intentions=intentions, **({"layers": args.layers} if args.layers else {}))
     name = default_weights(model, subsets)
@@ -233,9 +243,7 @@ def _train_wandr(args: argparse.Namespace) -> int:
              "late_kl_weight": args.late_kl_weight, "kl_raise_epoch": args.kl_raise_epoch, "weights": args.weights or name, "run_dir": args.run_dir or Path("runs") / name.stem}  # fmt: skip
     config = WandrTrainConfig(model=model, data_hash=dataset.path.stem, command="motion-envs " + " ".join(sys.argv[1:]),
                               **{key: value for key, value in given.items() if value is not None})  # fmt: skip
-    body = BodyModel()
-    entry = train_wandr(config, WandrClips.from_dataset(dataset, "train", body, mirrored=True),
-                        WandrClips.from_dataset(dataset, "validation", body))  # fmt: skip
+    entry = train_wandr(config, train_clips, validation_clips)
     for key, value in entry.items():
         if key.startswith("validation"):
             print(f"{key}: {json.dumps(value)}")
@@ -244,16 +252,10 @@ def _train_wandr(args: argparse.Namespace) -> int:
 
 
 def _train_clops(args: argparse.Namespace) -> int:
-    from motion_envs.body import BodyModel
-    from motion_envs.data.build import build
-    from motion_envs.data.dataset import MotionDataset
     from motion_envs.priors.clops import ClopsConfig
     from motion_envs.priors.train_clops import ClopsTrainConfig, train_clops
-    from motion_envs.priors.train_wandr import WandrClips
-    from motion_envs.priors.wandr_features import FPS
 
-    dataset = MotionDataset.load(build(mocap_dir=args.mocap_dir, cache_dir=args.cache_dir, subsets=tuple(dict.fromkeys(args.subset)),
-                                       fps_list=(FPS,)).caches[FPS])  # fmt: skip
+    dataset, train_clips, validation_clips = _delta_prior_clips(args)
     model = ClopsConfig(**{name: value for name, value in (("layers", args.layers), ("actions", args.actions)) if value})
     given = {"epochs": args.epochs, "batch_size": args.batch_size, "window_stride": args.window_stride, "seed": args.seed,
              "max_rollout": args.max_rollout, "kl_weight": args.kl_weight, "weights": args.weights, "run_dir": args.run_dir}  # fmt: skip
@@ -261,9 +263,7 @@ def _train_clops(args: argparse.Namespace) -> int:
         given["init"] = None if str(args.clops_init) == "scratch" else args.clops_init
     config = ClopsTrainConfig(model=model, data_hash=dataset.path.stem, command="motion-envs " + " ".join(sys.argv[1:]),
                               **{key: value for key, value in given.items() if value is not None or key == "init"})  # fmt: skip
-    body = BodyModel()
-    entry = train_clops(config, WandrClips.from_dataset(dataset, "train", body, mirrored=True),
-                        WandrClips.from_dataset(dataset, "validation", body))  # fmt: skip
+    entry = train_clops(config, train_clips, validation_clips)
     for key, value in entry.items():
         if key.startswith("validation"):
             print(f"{key}: {json.dumps(value)}")

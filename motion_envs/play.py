@@ -129,7 +129,7 @@ class LiveEpisodes:
                 self.observation, _ = self.env.reset(seed=self.seed)
             if self.env_id == CLOPS_ID:
                 action = self.controller(self.env, self.observation)
-                recorder.scene = ":".join(self.env.core.render_scene(self.env.state).name.rsplit("-", 1))
+                recorder.scene = self.env.core.scene_spec(self.env.state)
             else:
                 action = self.controller(self.env.core, self.env.state)[0].numpy()
             self.observation, _, terminated, truncated, _ = self.env.step(action)
@@ -255,7 +255,7 @@ def _clops_episode(env, controller: Callable, writer, seed: int, every: int, sea
     observation, _ = env.reset(seed=seed)
     env.keep_frames = writer is not None or recorder is not None
     if recorder is not None:  # the viewer rebuilds the room from "family:seed" (the last episode's room)
-        recorder.scene = ":".join(env.core.render_scene(env.state).name.rsplit("-", 1))
+        recorder.scene = env.core.scene_spec(env.state)
     trail = [env.trail[0]]
     info: dict = {}
     for _ in range(10_000):

@@ -27,6 +27,17 @@ def axis_angle_to_matrix(rotvec: torch.Tensor) -> torch.Tensor:
     return rodrigues(x, y, z)
 
 
+def about_z(angle: torch.Tensor) -> torch.Tensor:
+    """(...,) radians -> (..., 3, 3) rotations about +z (counter-clockwise seen from above)."""
+    zero = torch.zeros_like(angle)
+    return rodrigues(zero, zero, angle)
+
+
+def wrap_angle(angle: torch.Tensor) -> torch.Tensor:
+    """Angles (...,) wrapped into (-π, π]."""
+    return torch.atan2(torch.sin(angle), torch.cos(angle))
+
+
 def rodrigues(x: torch.Tensor, y: torch.Tensor, z: torch.Tensor) -> torch.Tensor:
     """Axis-angle given as three (...) component planes -> (..., 3, 3) rotations.
 

@@ -82,16 +82,16 @@ import gymnasium as gym
 import numpy as np
 import torch
 
-from motion_envs.batched import BatchedState, where_bodies
+from motion_envs.batched import where_bodies
 from motion_envs.body import BodyModel
 from motion_envs.body.collision_spheres import spheres_of_joints
 from motion_envs.body.head_camera import camera_from_head
-from motion_envs.body.rotations import matrix_to_sixd
+from motion_envs.body.rotations import about_z, matrix_to_sixd
 from motion_envs.counter_random import counter_normal
 from motion_envs.envs.core import CoreVectorEnv, check_actions, config_from_kwargs
-from motion_envs.envs.starts import StartBodies
+from motion_envs.envs.starts import DeltaPriorBodies, StartBodies
 from motion_envs.metrics import lowest_foot, track_skating
-from motion_envs.priors.clops import ClopsPrior, ClopsStepper, action_targets, head_pose, head_yaw
+from motion_envs.priors.clops import ClopsPrior, ClopsStepper, action_targets, head_pose, head_yaw, yaw_change
 from motion_envs.priors.train_clops import load_clops
 from motion_envs.priors.wandr_features import FPS, PELVIS, WandrState
 from motion_envs.render.egocentric import EgocentricRenderer
@@ -174,7 +174,7 @@ class ClopsNavConfig:
 
 
 @dataclasses.dataclass(frozen=True)
-class ClopsNavState(BatchedState):
+class ClopsNavState(DeltaPriorBodies):
     """N bodies' simulation state.
 
     body: the prior's state as tensors; goal: (N, 3); scene: (N,) index into the core's scene list;
@@ -183,11 +183,6 @@ class ClopsNavState(BatchedState):
     where it was; skated: (N,) skating frames; found: (N,) bool; view: (N, 5, H, W) uint8 the current view.
     """
 
-    transl: torch.Tensor
-    orient: torch.Tensor
-    pose: torch.Tensor
-    previous_delta: torch.Tensor
-    joints: torch.Tensor
     goal: torch.Tensor
     scene: torch.Tensor
     noise_key: torch.Tensor
@@ -199,10 +194,6 @@ class ClopsNavState(BatchedState):
     skated: torch.Tensor
     found: torch.Tensor
     view: torch.Tensor
-
-    @property
-    def body(self) -> WandrState:
-        return WandrState(self.transl, self.orient, self.pose, self.previous_delta, self.joints)
 
     @property
     def distance(self) -> torch.Tensor:
@@ -246,6 +237,8 @@ class ClopsNavCore:
         self.starts = StartBodies(self.stepper, self.device)
         self.slots: list[SceneSlot] = []
         self._slot_of: dict[tuple[str, int], int] = {}
+        self.bounds = torch.zeros(0, 4, device=self.device)
+        """(S, 4) walkable rectangle (x0, y0, x1, y1) of every slot, indexed like `slots`."""
 
     @property
     def num_actions(self) -> int:
@@ -257,6 +250,7 @@ class ClopsNavCore:
         if key not in self._slot_of:
             self._slot_of[key] = len(self.slots)
             self.slots.append(SceneSlot(make_scene(family, int(seed)), self.config))
+            self.bounds = torch.cat([self.bounds, self.slots[-1].bounds.to(self.device)[None]])
         return self._slot_of[key]
 
     def sample_initial_state(self, rngs: list[np.random.Generator], options: dict[str, Any] | None = None) -> ClopsNavState:
@@ -331,7 +325,7 @@ class ClopsNavCore:
 
     def left_room(self, state: ClopsNavState) -> torch.Tensor:
         """(N,) bool: the pelvis more than `room_margin` outside its scene's walkable rectangle."""
-        bounds = torch.stack([self.slots[index].bounds for index in state.scene.tolist()]).to(self.device)
+        bounds = self.bounds[state.scene]
         margin = self.config.room_margin
         pelvis = state.joints[:, PELVIS, :2]
         return ((pelvis < bounds[:, :2] - margin) | (pelvis > bounds[:, 2:] + margin)).any(-1)
@@ -339,10 +333,7 @@ class ClopsNavCore:
     def goal_in_head_frame(self, state: ClopsNavState) -> torch.Tensor:
         """(N, 3) the goal relative to the head, in the head's yaw frame (x right, y forward, z up)."""
         head = head_pose(state.body)
-        yaw = head_yaw(head.rotation)
-        offset = state.goal - head.position
-        cosine, sine = torch.cos(yaw), torch.sin(yaw)
-        return torch.stack([cosine * offset[:, 0] + sine * offset[:, 1], -sine * offset[:, 0] + cosine * offset[:, 1], offset[:, 2]], -1)
+        return ((state.goal - head.position)[:, None] @ about_z(head_yaw(head.rotation))).squeeze(1)  # R_zᵀ (g − h)
 
     def observe(self, state: ClopsNavState) -> np.ndarray | dict[str, np.ndarray]:
         """(N, 5, H, W) uint8 views, or with `known_goal` a dict of those (`image`) and the goal (`goal`, (N, 3))."""
@@ -391,8 +382,7 @@ class ClopsNavCore:
         view = self.views(body, state.goal, state.scene)
         visible = (view[:, 4] > 0).flatten(1).any(-1)  # the goal in the field of view, not hidden by the scene
         end_head = head_pose(body)
-        turned = head_yaw(end_head.rotation) - head_yaw(start_head.rotation)
-        turned = torch.atan2(torch.sin(turned), torch.cos(turned))
+        turned = yaw_change(start_head.rotation, end_head.rotation)
         moved_by = (end_head.position[:, :2] - start_head.position[:, :2]).norm(dim=-1)
         state = dataclasses.replace(state, **body._asdict(), frame=frame, actions=state.actions + 1,
                                     collided=state.collided + collided.long(), lowest_id=lowest_id, lowest_xy=lowest_xy,
@@ -415,6 +405,10 @@ class ClopsNavCore:
 
     def render_inputs(self, state: ClopsNavState) -> RenderInputs:
         return RenderInputs(state.transl, matrix_to_sixd(state.orient), matrix_to_sixd(state.pose), state.joints[:, PELVIS], state.goal)
+
+    def scene_spec(self, state: ClopsNavState) -> str:
+        """The first body's room as "family:seed" (what rollouts record and `motion-envs view --scene` takes)."""
+        return ":".join(self.render_scene(state).name.rsplit("-", 1))
 
     def render_scene(self, state: ClopsNavState) -> Scene:
         """The scene drawn behind the bodies (the first body's)."""

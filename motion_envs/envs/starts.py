@@ -1,19 +1,33 @@
-"""Start bodies for the 30 fps delta-prior environments (WandrReach, ClopsNav): the shipped start windows placed
-in the world."""
+"""What the 30 fps delta-prior environments (WandrReach, ClopsNav) share: the bodies' part of their batched state
+and the shipped start windows placed in the world."""
 
 from __future__ import annotations
+
+import dataclasses
 
 import roma
 import torch
 
+from motion_envs.batched import BatchedState
+from motion_envs.body.rotations import about_z
 from motion_envs.data.start_poses import load_start_poses
 from motion_envs.priors.wandr import WandrStepper
 from motion_envs.priors.wandr_features import FPS, WandrState, make_state, pose_delta
 
 
-def about_z(angle: torch.Tensor) -> torch.Tensor:
-    """(N,) radians -> (N, 3, 3) rotations about +z."""
-    return roma.rotvec_to_rotmat(torch.stack([torch.zeros_like(angle), torch.zeros_like(angle), angle], -1))
+@dataclasses.dataclass(frozen=True)
+class DeltaPriorBodies(BatchedState):
+    """The first fields of a delta-prior env's state: the prior's `WandrState` of N bodies, as tensors."""
+
+    transl: torch.Tensor
+    orient: torch.Tensor
+    pose: torch.Tensor
+    previous_delta: torch.Tensor
+    joints: torch.Tensor
+
+    @property
+    def body(self) -> WandrState:
+        return WandrState(self.transl, self.orient, self.pose, self.previous_delta, self.joints)
 
 
 class StartBodies:

@@ -88,11 +88,11 @@ import gymnasium as gym
 import numpy as np
 import torch
 
-from motion_envs.batched import BatchedState, where_bodies
+from motion_envs.batched import where_bodies
 from motion_envs.body import BodyModel
 from motion_envs.body.rotations import matrix_to_sixd
 from motion_envs.envs.core import CoreVectorEnv, check_actions, config_from_kwargs
-from motion_envs.envs.starts import StartBodies
+from motion_envs.envs.starts import DeltaPriorBodies, StartBodies
 from motion_envs.metrics import lowest_foot, track_skating
 from motion_envs.priors.train_wandr import load_wandr
 from motion_envs.priors.wandr import WandrPrior, WandrStepper
@@ -142,7 +142,7 @@ class WandrReachConfig:
 
 
 @dataclasses.dataclass(frozen=True)
-class WandrReachState(BatchedState):
+class WandrReachState(DeltaPriorBodies):
     """N bodies' simulation state.
 
     body: the prior's state (pose, previous delta, joints) as tensors; goals: (N, G, 3) the goal list
@@ -153,11 +153,6 @@ class WandrReachState(BatchedState):
     and where it was; skated: (N,) skating frames so far; reached: (N,) bool, the last goal reached.
     """
 
-    transl: torch.Tensor
-    orient: torch.Tensor
-    pose: torch.Tensor
-    previous_delta: torch.Tensor
-    joints: torch.Tensor
     goals: torch.Tensor
     goal_index: torch.Tensor
     goal_count: torch.Tensor
@@ -171,10 +166,6 @@ class WandrReachState(BatchedState):
     lowest_xy: torch.Tensor
     skated: torch.Tensor
     reached: torch.Tensor
-
-    @property
-    def body(self) -> WandrState:
-        return WandrState(self.transl, self.orient, self.pose, self.previous_delta, self.joints)
 
     @property
     def goal(self) -> torch.Tensor:

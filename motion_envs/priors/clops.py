@@ -33,7 +33,7 @@ import torch
 
 from motion_envs.body import BodyModel
 from motion_envs.body.frames import MANNEQUIN_TO_WORLD
-from motion_envs.body.rotations import matrix_to_sixd
+from motion_envs.body.rotations import about_z, matrix_to_sixd, wrap_angle
 from motion_envs.priors.wandr import WandrPrior, WandrStepper
 from motion_envs.priors.wandr_features import WandrState, condition, heading, integrate, make_state
 
@@ -106,21 +106,16 @@ def head_yaw(rotation: torch.Tensor) -> torch.Tensor:
     return torch.atan2(-rotation[..., 0, 1], rotation[..., 1, 1])
 
 
-def about_z(angle: torch.Tensor) -> torch.Tensor:
-    """(...,) radians -> (..., 3, 3) rotations about +z."""
-    cosine, sine = torch.cos(angle), torch.sin(angle)
-    zero, one = torch.zeros_like(angle), torch.ones_like(angle)
-    rows = [torch.stack([cosine, -sine, zero], -1), torch.stack([sine, cosine, zero], -1), torch.stack([zero, zero, one], -1)]
-    return torch.stack(rows, dim=-2)
+def yaw_change(start: torch.Tensor, end: torch.Tensor) -> torch.Tensor:
+    """(...,) yaw (radians, left positive, in (-π, π]) from rotations `start` to `end` (..., 3, 3)."""
+    return wrap_angle(head_yaw(end) - head_yaw(start))
 
 
 def head_deltas(start: HeadPose, end: HeadPose) -> torch.Tensor:
     """(B, 4) (dx, dy, dz, dyaw) of head poses `end` relative to `start`, in the start head's yaw frame."""
     yaw = head_yaw(start.rotation)
     local = ((end.position - start.position)[:, None] @ about_z(yaw)).squeeze(1)
-    turn = head_yaw(end.rotation) - yaw
-    turn = torch.atan2(torch.sin(turn), torch.cos(turn))
-    return torch.cat([local, turn[:, None]], dim=1)
+    return torch.cat([local, yaw_change(start.rotation, end.rotation)[:, None]], dim=1)
 
 
 def action_targets(head: HeadPose, deltas: torch.Tensor) -> HeadPose:
@@ -154,5 +149,4 @@ class ClopsStepper(WandrStepper):
         """(B,) bool: the head within `reach_distance` (on the ground plane) and `reach_angle` (yaw) of its target."""
         head = head_pose(state)
         near = (head.position[:, :2] - target.position[:, :2]).norm(dim=-1) <= self.reach_distance
-        turn = head_yaw(head.rotation) - head_yaw(target.rotation)
-        return near & (torch.atan2(torch.sin(turn), torch.cos(turn)).abs() <= self.reach_angle)
+        return near & (yaw_change(target.rotation, head.rotation).abs() <= self.reach_angle)

@@ -52,14 +52,22 @@ def top_down(axis: Axes, paths: np.ndarray, goals: np.ndarray | None = None, sce
         axis.set_title(title)
 
 
-def success_by(axes: Sequence[Axes], panels: dict[str, tuple[Sequence[str], Sequence[float]]],
+def success_by(axes: Sequence[Axes], panels: dict[str, tuple[Sequence[str], dict[str, Sequence[float]]]],
                ylabel: str = "success rate (%)") -> None:  # fmt: skip
-    """One bar chart per panel: {x-axis label: (tick labels, success values)} (e.g. by goal height, angle, distance)."""
-    for index, (axis, (name, (ticks, values))) in enumerate(zip(axes, panels.items())):
-        axis.bar(list(ticks), list(values), color=BAR_COLOURS[index % len(BAR_COLOURS)])
+    """One bar chart per panel: {x-axis label: (tick labels, {series: success values})} (e.g. by goal height, angle,
+    distance); several series are grouped side by side, with a legend."""
+    for axis, (name, (ticks, series)) in zip(axes, panels.items()):
+        width = 0.8 / len(series)
+        for index, (label, values) in enumerate(series.items()):
+            offsets = np.arange(len(ticks)) + (index - (len(series) - 1) / 2) * width
+            axis.bar(offsets, list(values), width=width, color=BAR_COLOURS[index % len(BAR_COLOURS)], label=label)
+        axis.set_xticks(range(len(ticks)), list(ticks))
         axis.set_xlabel(name)
         axis.grid(axis="y", alpha=0.3)
     axes[0].set_ylabel(ylabel)
+    if len(series) > 1:
+        axes[0].set_ylim(0, 130)  # room for the legend above 100%
+        axes[0].legend(fontsize=7, loc="upper left")
 
 
 def learning_curves(by_steps: Axes, by_time: Axes | None, curves: dict[str, Sequence[dict]], value: str = "success_rate",

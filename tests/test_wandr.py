@@ -160,6 +160,19 @@ def test_sampler_reaches_a_goal_just_in_front_of_the_wrist(shipped):
     assert (final.closest < 0.25).all()  # every wrist came closer than the 0.3 m it started at
 
 
+def test_a_goal_due_at_a_walking_pace_is_reached_far_more_often_than_one_due_in_8_s(shipped):
+    from benchmarks.wandr_grid import grid_start
+
+    core = WandrReachCore(WandrReachConfig(), shipped)
+    rates = {}
+    for paced in (False, True):
+        start, cells = grid_start(core, poses=1, samples=1, paced=paced)  # 125 goals around one start pose
+        due = start.deadline.float() / 30
+        assert torch.allclose(due, torch.full_like(due, 8.0)) if not paced else bool((due < 8).any() and (due <= 8).all())
+        rates[paced] = float(roll_out(core, start, WandrSampler(seed=0)).reached.float().mean())
+    assert rates[True] >= 0.3 and rates[True] >= rates[False] + 0.2  # shipped prior: 62% vs 6% (the paper protocol's 8 s)
+
+
 def test_latent_optimisation_brings_the_wrist_closer(shipped):
     # The shipped prior: with an untrained one the 6-frame objective was chaotic (a 1e-7 change in forward
     # kinematics flipped the outcome, and a smaller step size made it worse).

@@ -184,7 +184,7 @@ def latent_cost(z: torch.Tensor) -> torch.Tensor:
 class ClopsRewardConfig:
     """Scales of CLOPS's reward (Eq. 5), paid per action; the paper's constants were lost from its text, these are ours.
 
-    r = −time − collision · collided − still · stayed + goal · found
+    r = −time − collision · collided − still · stayed + goal · found − left_room · left
     """
 
     time: float = 0.1
@@ -195,6 +195,9 @@ class ClopsRewardConfig:
     """An action after which the head has neither moved nor turned (`ClopsNavConfig.still_distance`, `still_angle`)."""
     goal: float = 10.0
     """The action that ends with the goal near (`success_distance`) and in view (any goal-mask pixel)."""
+    left_room: float = 5.0
+    """Ours, not the paper's (its Replica rooms are closed): the action after which the pelvis is out of the room
+    (`ClopsNavConfig.room_margin`); the episode ends there."""
 
     @classmethod
     def named(cls, spec: str) -> ClopsRewardConfig:

@@ -18,6 +18,7 @@ from motion_envs.envs.clops_nav import ClopsNavConfig, ClopsNavCore
 from motion_envs.priors.clops import HeadPose, action_targets, head_deltas, head_pose, head_rotation
 from motion_envs.priors.train_clops import ClopsTrainConfig, fit_head_actions, load_clops, train_clops
 from motion_envs.priors.train_wandr import WandrClips
+from motion_envs.priors.wandr_features import PELVIS
 from motion_envs.rewards import ClopsRewardConfig, goal_found, stayed_still
 from motion_envs.scenes.labels import LABELS
 
@@ -133,6 +134,33 @@ def test_a_body_inside_furniture_collides_and_pays_for_it(core):
     scales = core.config.reward
     expected = -scales.time - scales.collision - scales.still * float(hit.terms["still"][0])
     assert float(hit.reward[0]) == pytest.approx(expected, abs=1e-5)
+
+
+def test_walking_out_of_the_room_ends_the_episode_and_pays_for_it(core):
+    x0, y0, x1, y1 = core.slots[core.slot("open", SEEDS[0])].bounds.tolist()
+    forward = int(core.prior.actions[:, 1].argmax())
+    start_forward = core.starts.forward(torch.tensor([0]), torch.zeros(1))[0]
+    facing = math.pi - math.atan2(float(start_forward[1]), float(start_forward[0]))  # turns the start pose to face -x
+    state = core.sample_initial_state([np.random.default_rng(3)], {
+        "start": [x0 + 0.3, (y0 + y1) / 2], "facing": facing, "start_index": 0, "goal": [x1 - 0.5, (y0 + y1) / 2, 1.0]})
+    for _ in range(6):
+        state, result = core.step(state, torch.tensor([forward]))
+        if result.terminated[0] or result.truncated[0]:
+            break
+    assert bool(result.left_room[0]) and bool(result.terminated[0]) and not bool(result.truncated[0])
+    assert float(state.joints[0, PELVIS, 0]) < x0 - core.config.room_margin and not bool(state.found[0])
+    scales, terms = core.config.reward, {name: float(value[0]) for name, value in result.terms.items()}
+    expected = -scales.time - scales.collision * terms["collision"] - scales.still * terms["still"] - scales.left_room
+    assert terms["left_room"] == 1.0 and float(result.reward[0]) == pytest.approx(expected, abs=1e-5)
+
+
+def test_mixed_family_draws_rooms_of_every_family():
+    core = ClopsNavCore(ClopsNavConfig(family="mixed", train_scenes=2))
+    state = core.sample_initial_state([np.random.default_rng(seed) for seed in range(24)])
+    families = {core.slots[int(index)].scene.name.rsplit("-", 1)[0] for index in state.scene}
+    assert families == set(core.config.families) and len(families) == 5
+    with pytest.raises(ValueError, match="unknown scene family 'attic'.*mixed"):
+        ClopsNavConfig(family="attic")
 
 
 def test_vector_env_equals_single_envs_and_renders():

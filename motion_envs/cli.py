@@ -388,7 +388,7 @@ def parser() -> argparse.ArgumentParser:
     train.add_argument("--kl-weight", type=float, default=None, help="wandr: β of the KL term (paper 0.01)")
     train.add_argument("--late-kl-weight", type=float, default=None, help="wandr: β from --kl-raise-epoch on")
     train.add_argument("--kl-raise-epoch", type=int, default=None, help="wandr: first epoch of --late-kl-weight")
-    train.add_argument("--family", default=None, help="dqn: ClopsNav scene family trained on (default open)")
+    train.add_argument("--family", default=None, help="dqn: ClopsNav scene family trained on (default open; mixed: all five)")
     train.add_argument("--known-goal", action="store_true", help="dqn: also observe the goal position (CLOPS + known goal)")
     train.add_argument("--actions", type=int, default=None, help="clops: k-means head-delta clusters K (default 16)")
     train.add_argument("--clops-init", default=None, help="clops: WANDR weights to start from, or 'scratch' (default: shipped wandr.pt)")

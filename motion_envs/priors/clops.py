@@ -24,7 +24,6 @@ use N = 30 frames (1 s at 30 fps: the policy acts at 1 Hz, REFERENCE_NOTES
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -128,12 +127,10 @@ def action_targets(head: HeadPose, deltas: torch.Tensor) -> HeadPose:
 class ClopsStepper(WandrStepper):
     """Rolls bodies towards target head poses with a trained `ClopsPrior` (feet kept on the floor, as WANDR's)."""
 
-    def __init__(self, prior: ClopsPrior, body: BodyModel | None = None, ground_feet: bool = True,
-                 reach_distance: float = 0.2, reach_angle: float = math.radians(20.0)) -> None:  # fmt: skip
-        """reach_distance (m, on the ground) and reach_angle (rad, yaw): when a head counts as at its target. The
-        defaults match the shipped prior's precision: after a 1-s forward walk from standing its head lands a median
-        12-16 cm from the target (0.10 m and 10° were reached by 31-41% of forward walks within 45 frames,
-        0.2 m and 20° by 78-94%; 64 bodies, `open`)."""
+    def __init__(self, prior: ClopsPrior, body: BodyModel | None = None, ground_feet: bool = True, *,
+                 reach_distance: float, reach_angle: float) -> None:  # fmt: skip
+        """reach_distance (m, on the ground) and reach_angle (rad, yaw): when a head counts as at its target
+        (`ClopsNavConfig` holds the defaults and their measurements)."""
         super().__init__(prior, body, ground_feet, intentions=())  # the intention slot holds the head target
         self.reach_distance, self.reach_angle = reach_distance, reach_angle
 

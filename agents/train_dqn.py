@@ -3,7 +3,7 @@
 Reads top to bottom: the native vector env (`num_envs` bodies, each in a
 room of `family`) -> VecMonitor -> `PrioritizedDoubleDQN` with SB3's
 `CnnPolicy` (NatureCNN on the 5 × 64 × 64 view; `MultiInputPolicy` with the
-known goal) -> learn with `CurveCallback` (every `checkpoint_minutes`: the
+known goal or the goal memory) -> learn with `CurveCallback` (every `checkpoint_minutes`: the
 model saved atomically, the success rate of the episodes finished since) ->
 the best window's policy under `priors/weights/` + manifest entry + the
 learning-curve plot.
@@ -37,6 +37,8 @@ class DQNTrainConfig:
     family: str = "open"
     """The layout family trained on (the paper trains one policy per Replica scene)."""
     known_goal: bool = False
+    goal_memory: bool = False
+    """Observe the env's memory of what the view has shown (`ClopsNavConfig.goal_memory`; ours)."""
     env_kwargs: dict = field(default_factory=dict)
     num_envs: int = 32
     total_timesteps: int = 150_000
@@ -61,12 +63,12 @@ class DQNTrainConfig:
     command: str = ""
 
     def weights_path(self) -> Path:
-        known = "_known_goal" if self.known_goal else ""
-        return self.weights or WEIGHTS_DIR / f"dqn_clopsnav_{self.family}{known}.zip"
+        suffix = "_known_goal" if self.known_goal else "_memory" if self.goal_memory else ""
+        return self.weights or WEIGHTS_DIR / f"dqn_clopsnav_{self.family}{suffix}.zip"
 
 
 def make_model(config: DQNTrainConfig, venv: VecMonitor) -> PrioritizedDoubleDQN:
-    policy = "MultiInputPolicy" if config.known_goal else "CnnPolicy"
+    policy = "MultiInputPolicy" if config.known_goal or config.goal_memory else "CnnPolicy"
     return PrioritizedDoubleDQN(
         policy, venv, alpha=config.alpha, beta_start=config.beta_start, buffer_size=config.buffer_size,
         learning_starts=config.learning_starts, batch_size=config.batch_size, learning_rate=config.learning_rate,
@@ -82,7 +84,8 @@ def train_dqn(config: DQNTrainConfig) -> dict:
     config.run_dir.mkdir(parents=True, exist_ok=True)
     torch.manual_seed(config.seed)
     venv = VecMonitor(NativeVecEnv.make(config.env_id, num_envs=config.num_envs, family=config.family,
-                                        known_goal=config.known_goal, **config.env_kwargs))  # fmt: skip
+                                        known_goal=config.known_goal, goal_memory=config.goal_memory,
+                                        **config.env_kwargs))  # fmt: skip
     venv.seed(config.seed)
     checkpoint, curve_path = config.run_dir / "model.zip", config.run_dir / "curve.json"
     curve = json.loads(curve_path.read_text()) if curve_path.exists() else []

@@ -14,8 +14,8 @@ family, the same starts and goals for every row). Per row and family:
 
 Rows beside the DQN policies: uniformly random actions; the non-visual
 GAMMA navigator told the goal (EgoGen-like, `baselines.gamma_navigator`);
-the known-goal DQN policy (`dqn_clopsnav_<family>_known_goal.zip`) where
-shipped. The paper's numbers go beside (its Table 1 matrix on Replica S1-S5
+the known-goal DQN policy (`dqn_clopsnav_<family>_known_goal.zip`) and the
+goal-memory one (`dqn_clopsnav_<family>_memory.zip`, ours) where shipped. The paper's numbers go beside (its Table 1 matrix on Replica S1-S5
 and its Table 2). Writes `benchmarks/results/clops_matrix.md`, and
 `clops_matrix.png`: the egocentric frames of one episode (semantic colours,
 goal pixels red) over its top-down path, and the SR matrix.
@@ -49,6 +49,11 @@ PAPER_TABLE2 = {  # SR %, Col %, FS %
 PAPER_SR_MATRIX = [[93, 84, 96, 78, 85], [78, 87, 93, 73, 78], [81, 72, 84, 72, 72], [90, 84, 94, 78, 73], [87, 78, 90, 66, 68]]
 PAPER_COL_MATRIX = [[26, 16, 35, 42, 40], [42, 10, 35, 43, 43], [40, 20, 19, 45, 38], [39, 20, 35, 38, 38], [39, 17, 36, 40, 27]]
 GAMMA_POLICY = WEIGHTS_DIR / "ppo_gammareach_alpha1_paper.zip"
+OBSERVATIONS = {  # policy-name suffix -> (row-label suffix, the env's observation options)
+    "": ("", {}),
+    "_known_goal": (" + known goal", {"known_goal": True}),
+    "_memory": (" + goal memory", {"goal_memory": True}),
+}
 
 Controller = Callable[[ClopsNavCore, ClopsNavState], torch.Tensor]
 
@@ -126,17 +131,19 @@ def main(episodes_per_family: int = 100, families: tuple[str, ...] = tuple(FAMIL
     rows: dict[str, dict[str, Scores]] = {}
     started = time.perf_counter()
     for family in families:
-        for known in (False, True):
-            core = ClopsNavCore(ClopsNavConfig(family=family, split="test", known_goal=known))
+        for suffix, (label_suffix, options) in OBSERVATIONS.items():
+            observed = {name: path for name, path in policies.items() if observation_of(name) == suffix}
+            if suffix and not observed:
+                continue
+            core = ClopsNavCore(ClopsNavConfig(family=family, split="test", **options))
             state = episodes(core, episodes_per_family)
             controllers: dict[str, Callable[[], Scores]] = {}
-            if not known:
+            if not suffix:
                 controllers["random actions"] = lambda: run(core, state.clone(), random_actions(seed))
                 controllers["GAMMA navigator, known goal (EgoGen-like)"] = lambda: gamma_row(core, state.clone())
-            for name, path in policies.items():
-                if name.endswith("_known_goal") == known:
-                    label = f"CLOPS DQN trained on {name.removesuffix('_known_goal')}" + (" + known goal" if known else "")
-                    controllers[label] = lambda path=path: run(core, state.clone(), policy_actions(path))
+            for name, path in observed.items():
+                label = f"CLOPS DQN trained on {name.removesuffix(suffix)}{label_suffix}"
+                controllers[label] = lambda path=path: run(core, state.clone(), policy_actions(path))
             for label, evaluate in controllers.items():
                 tick = time.perf_counter()
                 rows.setdefault(label, {})[family] = scores = evaluate()
@@ -147,10 +154,20 @@ def main(episodes_per_family: int = 100, families: tuple[str, ...] = tuple(FAMIL
     return 0
 
 
+def observation_of(policy_name: str) -> str:
+    """The `OBSERVATIONS` suffix of a policy name ("open_known_goal" -> "_known_goal", "open" -> "")."""
+    return next((suffix for suffix in OBSERVATIONS if suffix and policy_name.endswith(suffix)), "")
+
+
 def trained_on(label: str) -> str | None:
     """The family a DQN row's policy was trained on ("CLOPS DQN trained on living + known goal" -> "living")."""
     prefix = "CLOPS DQN trained on "
-    return label.removeprefix(prefix).removesuffix(" + known goal") if label.startswith(prefix) else None
+    if not label.startswith(prefix):
+        return None
+    family = label.removeprefix(prefix)
+    for label_suffix, _ in OBSERVATIONS.values():
+        family = family.removesuffix(label_suffix) if label_suffix else family
+    return family
 
 
 def write_results(rows: dict[str, dict[str, Scores]], families: tuple[str, ...], count: int, wall: float) -> None:

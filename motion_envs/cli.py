@@ -162,7 +162,8 @@ def _train_ppo(args: argparse.Namespace) -> int:
 def _train_dqn(args: argparse.Namespace) -> int:
     from agents.train_dqn import DQNTrainConfig, train_dqn
 
-    given = {"family": args.family, "known_goal": args.known_goal or None, "num_envs": args.num_envs,
+    given = {"family": args.family, "known_goal": args.known_goal or None, "goal_memory": args.goal_memory or None,
+             "num_envs": args.num_envs,
              "total_timesteps": args.timesteps, "run_dir": args.run_dir, "weights": args.weights, "seed": args.seed,
              "learning_rate": args.learning_rate, "batch_size": args.batch_size,
              "env_kwargs": dict(_env_option(option) for option in args.env_option) or None}  # fmt: skip
@@ -390,6 +391,8 @@ def parser() -> argparse.ArgumentParser:
     train.add_argument("--kl-raise-epoch", type=int, default=None, help="wandr: first epoch of --late-kl-weight")
     train.add_argument("--family", default=None, help="dqn: ClopsNav scene family trained on (default open; mixed: all five)")
     train.add_argument("--known-goal", action="store_true", help="dqn: also observe the goal position (CLOPS + known goal)")
+    train.add_argument("--goal-memory", action="store_true",
+                       help="dqn: also observe a memory of what the view has shown (where the goal was last seen; ours)")
     train.add_argument("--actions", type=int, default=None, help="clops: k-means head-delta clusters K (default 16)")
     train.add_argument("--clops-init", default=None, help="clops: WANDR weights to start from, or 'scratch' (default: shipped wandr.pt)")
     train.add_argument("--seed", type=int, default=None)

@@ -14,7 +14,7 @@ from gymnasium.utils.env_checker import check_env
 import motion_envs  # noqa: F401  (registers the ids)
 from agents.double_dqn import PrioritizedDoubleDQN
 from agents.prioritized_replay import PriorityLedger
-from motion_envs.envs.clops_nav import ClopsNavConfig, ClopsNavCore
+from motion_envs.envs.clops_nav import LOOK_BINS, MEMORY_SIZE, ClopsNavConfig, ClopsNavCore, goal_in_view
 from motion_envs.priors.clops import HeadPose, action_targets, head_deltas, head_pose, head_rotation
 from motion_envs.priors.train_clops import ClopsTrainConfig, fit_head_actions, load_clops, train_clops
 from motion_envs.priors.train_wandr import WandrClips
@@ -91,6 +91,12 @@ def test_spaces_and_check_env():
     observation, _ = known.reset(seed=0)
     assert set(observation) == {"image", "goal"} and observation["goal"].shape == (3,)
     check_env(known.unwrapped, skip_render_check=True)
+    remembering = gym.make(ENV_ID, scene_seeds=SEEDS, goal_memory=True)
+    observation, _ = remembering.reset(seed=0)
+    assert set(observation) == {"image", "memory"} and observation["memory"].shape == (MEMORY_SIZE,)
+    check_env(remembering.unwrapped, skip_render_check=True)
+    with pytest.raises(ValueError, match="known_goal and goal_memory exclude each other"):
+        gym.make(ENV_ID, scene_seeds=SEEDS, known_goal=True, goal_memory=True)
 
 
 def test_reward_term_functions_on_hand_computed_cases():
@@ -119,6 +125,31 @@ def test_goal_in_view_pays_and_goal_behind_does_not(core):
     assert found["behind"][:2] == (False, 0.0)
     terms_front = found["front"][2] - found["behind"][2]
     assert terms_front == pytest.approx(10.0, abs=1e-4)  # the same action, only the goal term differs
+
+
+def test_the_goal_memory_keeps_a_goal_seen_and_then_turned_away_from(core):
+    drawn = core.sample_initial_state([np.random.default_rng(1)])
+    head = head_pose(drawn.body)
+    states = {}
+    for name, ahead in (("front", 1.5), ("behind", -1.5)):
+        goal = action_targets(head, torch.tensor([[0.0, ahead, 0.0, 0.0]])).position[0]
+        states[name] = core.sample_initial_state([np.random.default_rng(1)], {"goal": goal.tolist()})  # the same start
+    behind, front = core.memory(states["behind"])[0], core.memory(states["front"])[0]
+    assert behind[:4].tolist() == [0.0, 0.0, 0.0, 1.0]  # never seen: no position, time since = the whole episode
+    assert front[2:4].tolist() == [1.0, 0.0] and front[:2].tolist() == pytest.approx([0.0, 1.5], abs=1e-4)
+    looked = front[4 : 4 + LOOK_BINS]
+    assert looked[0] == 1 and looked[LOOK_BINS // 2] == 0 and front[-1] == 0  # ahead looked at, behind not, t = 0
+    turn, state = int(core.prior.actions[:, 3].abs().argmax()), states["front"]
+    for _ in range(6):  # turn until the goal is out of view
+        state, _ = core.step(state, torch.tensor([turn]))
+        if not goal_in_view(state.view)[0]:
+            break
+    memory = core.memory(state)[0]
+    assert not goal_in_view(state.view)[0] and memory[2] == 1.0
+    assert float(memory[3]) == pytest.approx(float(state.frame[0] - state.seen_at[0]) / core.config.max_frames)
+    assert memory[3] > 0 and memory[-1] == pytest.approx(float(state.frame[0]) / core.config.max_frames)
+    assert memory[:2].tolist() == pytest.approx(core.goal_in_head_frame(state)[0, :2].tolist(), abs=1e-4)
+    assert memory[4 : 4 + LOOK_BINS].sum() > looked.sum()  # turning looked at new directions
 
 
 def test_a_body_inside_furniture_collides_and_pays_for_it(core):

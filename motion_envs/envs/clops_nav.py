@@ -29,7 +29,14 @@ semantic colour (3, the fixed label palette), goal mask (0 or 255). With
 `known_goal=True` (the paper's "CLOPS + known goal") the observation is a
 `Dict` of that `image` and `goal`: `Box(-inf, inf, (3,), float32)`, the
 goal relative to the head in the head's yaw frame (m) — SB3's
-`MultiInputPolicy`.
+`MultiInputPolicy`. With `goal_memory=True` (ours) it is a `Dict` of the
+`image` and a `memory` vector `Box(-inf, inf, (13,), float32)`, what the
+body itself has seen so far (`ClopsNavCore.memory`): where the goal was
+when last in view (x, y relative to the head, head's yaw frame, m; zeros if
+never), whether it has been seen, the time since (fraction of the episode;
+1 if never), which of 8 directions around the body its view has pointed at
+(45° bins, from straight ahead counter-clockwise) and the elapsed fraction
+of the episode.
 
 ## Rewards
 
@@ -102,6 +109,21 @@ from motion_envs.scenes.scene import Scene
 
 RESET_OPTIONS = ("scene_seed", "start", "goal", "facing", "start_index")
 MIXED = "mixed"
+LOOK_BINS = 8
+MEMORY_SIZE = 5 + LOOK_BINS
+
+
+def goal_in_view(view: torch.Tensor) -> torch.Tensor:
+    """(N,) bool: any goal-mask pixel in views (N, 5, H, W)."""
+    return (view[:, 4] > 0).flatten(1).any(-1)
+
+
+def looked_bins(yaw: torch.Tensor, fov: float) -> torch.Tensor:
+    """(N, LOOK_BINS) bool: the yaw bins (centres k · 2π / LOOK_BINS) within half the field of view `fov` (degrees)
+    of views whose yaw is `yaw` (N,) radians."""
+    centres = torch.arange(LOOK_BINS, device=yaw.device) * (2 * math.pi / LOOK_BINS)
+    offset = torch.remainder(centres - yaw[:, None] + math.pi, 2 * math.pi) - math.pi
+    return offset.abs() <= math.radians(fov) / 2
 
 
 @dataclasses.dataclass(frozen=True)
@@ -153,6 +175,12 @@ class ClopsNavConfig:
     As a truncation (bootstrapped from the void's value, never learnt) it cost nothing: 10 of the open-trained
     policy's 30 failures on open test rooms were walks out of the room, most from starts facing a near wall."""
     known_goal: bool = False
+    goal_memory: bool = False
+    """Observe a memory of what the view has shown (module doc; ours). The paper's CLOPS has none and names it its
+    limit: "If, while looking at the goal, it makes a motion that puts the goal out of its field of view, then it
+    needs to find it all over again" (frame stacking did not help it). The goal's remembered position is its true
+    centre from the frame it was last in view: any goal pixel counts as a detection (an ideal detector; the sphere's
+    radius is 0.25 m)."""
     weights: str | None = None
     """CLOPS prior weights (default: the shipped priors/weights/clops.pt)."""
     device: str = "cpu"
@@ -172,6 +200,8 @@ class ClopsNavConfig:
             raise ValueError(f"train_scenes must lie in [1, {len(TRAIN_SEEDS)}], got {self.train_scenes}")
         if self.scene_seeds is not None and len(self.scene_seeds) == 0:
             raise ValueError("scene_seeds must name at least one seed")
+        if self.known_goal and self.goal_memory:
+            raise ValueError("known_goal and goal_memory exclude each other: a known goal needs no memory of it")
 
     @property
     def families(self) -> tuple[str, ...]:
@@ -196,7 +226,9 @@ class ClopsNavState(DeltaPriorBodies):
     body: the prior's state as tensors; goal: (N, 3); scene: (N,) index into the core's scene list;
     noise_key: (N,) int64 key of the body's latent draws; frame / actions / collided: (N,) frames so far,
     actions taken, actions that collided; lowest_id, lowest_xy: (N,), (N, 2) the lowest foot vertex and
-    where it was; skated: (N,) skating frames; found: (N,) bool; view: (N, 5, H, W) uint8 the current view.
+    where it was; skated: (N,) skating frames; found: (N,) bool; view: (N, 5, H, W) uint8 the current view;
+    seen_at: (N,) frame the goal was last in view (-1: never); looked: (N, LOOK_BINS) bool, the world yaw bins
+    (centred on k · 2π / LOOK_BINS, `head_yaw`'s convention) a view has pointed at after an action or the reset.
     """
 
     goal: torch.Tensor
@@ -210,6 +242,8 @@ class ClopsNavState(DeltaPriorBodies):
     skated: torch.Tensor
     found: torch.Tensor
     view: torch.Tensor
+    seen_at: torch.Tensor
+    looked: torch.Tensor
 
     @property
     def distance(self) -> torch.Tensor:
@@ -307,8 +341,15 @@ class ClopsNavCore:
         state = ClopsNavState(
             *body, goal, scene, torch.tensor(keys, device=self.device), zeros, zeros, zeros, lowest_id, lowest_xy, zeros,
             torch.zeros(count, dtype=torch.bool, device=self.device), torch.zeros(count, 0, device=self.device),
+            zeros - 1, torch.zeros(count, LOOK_BINS, dtype=torch.bool, device=self.device),
         )  # fmt: skip
-        return dataclasses.replace(state, view=self.views(state.body, goal, scene))
+        return self.remember(dataclasses.replace(state, view=self.views(state.body, goal, scene)))
+
+    def remember(self, state: ClopsNavState) -> ClopsNavState:
+        """The state with its current view remembered: `seen_at` if the goal is in view, the view's yaw bins `looked`."""
+        yaw = head_yaw(head_pose(state.body).rotation)
+        seen_at = torch.where(goal_in_view(state.view), state.frame, state.seen_at)
+        return dataclasses.replace(state, seen_at=seen_at, looked=state.looked | looked_bins(yaw, self.config.fov))
 
     def views(self, body: WandrState, goal: torch.Tensor, scene: torch.Tensor) -> torch.Tensor:
         """(N, 5, H, W) uint8 egocentric views of bodies from their head cameras, one ray cast per scene."""
@@ -329,7 +370,7 @@ class ClopsNavCore:
 
     def goal_visible(self, eye: torch.Tensor, rotation: torch.Tensor, goal: torch.Tensor, scene: torch.Tensor) -> torch.Tensor:
         """(N,) bool: any goal pixel in the view from cameras eye (N, 3), rotation (N, 3, 3)."""
-        return (self.views_from(eye, rotation, goal, scene)[:, 4] > 0).flatten(1).any(-1)
+        return goal_in_view(self.views_from(eye, rotation, goal, scene))
 
     def collisions(self, joints: torch.Tensor, scene: torch.Tensor) -> torch.Tensor:
         """(N,) bool: any collision sphere of bodies with joints (T, N, 22, 3) deeper than the tolerance in its scene."""
@@ -353,12 +394,30 @@ class ClopsNavCore:
         head = head_pose(state.body)
         return ((state.goal - head.position)[:, None] @ about_z(head_yaw(head.rotation))).squeeze(1)  # R_zᵀ (g − h)
 
+    def memory(self, state: ClopsNavState) -> torch.Tensor:
+        """(N, MEMORY_SIZE) float32: [remembered goal x, y (m, head's yaw frame; 0 if never seen), seen (0/1), time
+        since last seen (fraction of the episode; 1 if never), LOOK_BINS directions looked at (relative to the head:
+        bin j is j · 360° / LOOK_BINS counter-clockwise from ahead), elapsed fraction of the episode]."""
+        seen = state.seen_at >= 0
+        goal = self.goal_in_head_frame(state)[:, :2] * seen[:, None]
+        since = torch.where(seen, (state.frame - state.seen_at).float() / self.config.max_frames, 1.0)
+        width = 2 * math.pi / LOOK_BINS
+        yaw = head_yaw(head_pose(state.body).rotation)
+        relative = torch.arange(LOOK_BINS, device=self.device) * width
+        world_bin = torch.round((yaw[:, None] + relative) / width).long() % LOOK_BINS
+        looked = state.looked.gather(1, world_bin).float()
+        elapsed = state.frame.float() / self.config.max_frames
+        return torch.cat([goal, seen.float()[:, None], since[:, None], looked, elapsed[:, None]], dim=1)
+
     def observe(self, state: ClopsNavState) -> np.ndarray | dict[str, np.ndarray]:
-        """(N, 5, H, W) uint8 views, or with `known_goal` a dict of those (`image`) and the goal (`goal`, (N, 3))."""
+        """(N, 5, H, W) uint8 views; with `known_goal` a dict of those (`image`) and the goal (`goal`, (N, 3)), with
+        `goal_memory` of those and the memory (`memory`, (N, MEMORY_SIZE))."""
         image = state.view.cpu().numpy()
-        if not self.config.known_goal:
-            return image
-        return {"image": image, "goal": self.goal_in_head_frame(state).cpu().numpy().astype(np.float32)}
+        if self.config.known_goal:
+            return {"image": image, "goal": self.goal_in_head_frame(state).cpu().numpy().astype(np.float32)}
+        if self.config.goal_memory:
+            return {"image": image, "memory": self.memory(state).cpu().numpy().astype(np.float32)}
+        return image
 
     def check_actions(self, actions: torch.Tensor) -> torch.Tensor:
         """(N,) long action indices from (N,) numbers. Raises ValueError naming the bad ones."""
@@ -398,13 +457,14 @@ class ClopsNavCore:
         checked.append(body.joints)
         collided = self.collisions(torch.stack(checked), state.scene)
         view = self.views(body, state.goal, state.scene)
-        visible = (view[:, 4] > 0).flatten(1).any(-1)  # the goal in the field of view, not hidden by the scene
+        visible = goal_in_view(view)  # the goal in the field of view, not hidden by the scene
         end_head = head_pose(body)
         turned = yaw_change(start_head.rotation, end_head.rotation)
         moved_by = (end_head.position[:, :2] - start_head.position[:, :2]).norm(dim=-1)
         state = dataclasses.replace(state, **body._asdict(), frame=frame, actions=state.actions + 1,
                                     collided=state.collided + collided.long(), lowest_id=lowest_id, lowest_xy=lowest_xy,
                                     skated=skated, view=view)  # fmt: skip
+        state = self.remember(state)
         found = goal_found(state.distance, visible, config.success_distance)
         state = dataclasses.replace(state, found=found)
         left = self.left_room(state) & ~found
@@ -437,11 +497,12 @@ class ClopsNavCore:
 
 def _spaces(core: ClopsNavCore) -> tuple[gym.spaces.Discrete, gym.spaces.Space]:
     config = core.config
-    image = gym.spaces.Box(0, 255, (5, config.height, config.width), np.uint8)
-    if not config.known_goal:
-        return gym.spaces.Discrete(core.num_actions), image
-    goal = gym.spaces.Box(-np.inf, np.inf, (3,), np.float32)
-    return gym.spaces.Discrete(core.num_actions), gym.spaces.Dict({"image": image, "goal": goal})
+    observation = image = gym.spaces.Box(0, 255, (5, config.height, config.width), np.uint8)
+    if config.known_goal:
+        observation = gym.spaces.Dict({"image": image, "goal": gym.spaces.Box(-np.inf, np.inf, (3,), np.float32)})
+    elif config.goal_memory:
+        observation = gym.spaces.Dict({"image": image, "memory": gym.spaces.Box(-np.inf, np.inf, (MEMORY_SIZE,), np.float32)})
+    return gym.spaces.Discrete(core.num_actions), observation
 
 
 def with_view_inset(frame: np.ndarray, view: np.ndarray, scale: int = 2) -> np.ndarray:

@@ -15,8 +15,9 @@ family, the same starts and goals for every row). Per row and family:
 Rows beside the DQN policies: uniformly random actions; the non-visual
 GAMMA navigator told the goal (EgoGen-like, `baselines.gamma_navigator`);
 the known-goal DQN policy (`dqn_clopsnav_<family>_known_goal.zip`) and the
-goal-memory one (`dqn_clopsnav_<family>_memory.zip`, ours) where shipped. The paper's numbers go beside (its Table 1 matrix on Replica S1-S5
-and its Table 2). Writes `benchmarks/results/clops_matrix.md`, and
+goal-memory one (`dqn_clopsnav_<family>_memory.zip`, ours) where shipped.
+The paper's numbers go beside (its Table 1 matrix on Replica S1-S5 and its
+Table 2). Writes `benchmarks/results/clops_matrix.md`, and
 `clops_matrix.png`: the egocentric frames of one episode (semantic colours,
 goal pixels red) over its top-down path, and the SR matrix.
 """
@@ -166,7 +167,7 @@ def trained_on(label: str) -> str | None:
         return None
     family = label.removeprefix(prefix)
     for label_suffix, _ in OBSERVATIONS.values():
-        family = family.removesuffix(label_suffix) if label_suffix else family
+        family = family.removesuffix(label_suffix)
     return family
 
 

@@ -163,8 +163,7 @@ def _train_dqn(args: argparse.Namespace) -> int:
     from agents.train_dqn import DQNTrainConfig, train_dqn
 
     given = {"family": args.family, "known_goal": args.known_goal or None, "goal_memory": args.goal_memory or None,
-             "num_envs": args.num_envs,
-             "total_timesteps": args.timesteps, "run_dir": args.run_dir, "weights": args.weights, "seed": args.seed,
+             "num_envs": args.num_envs, "total_timesteps": args.timesteps, "run_dir": args.run_dir, "weights": args.weights, "seed": args.seed,
              "learning_rate": args.learning_rate, "batch_size": args.batch_size,
              "env_kwargs": dict(_env_option(option) for option in args.env_option) or None}  # fmt: skip
     config = DQNTrainConfig(command="motion-envs " + " ".join(sys.argv[1:]),

@@ -343,12 +343,13 @@ class ClopsNavCore:
             torch.zeros(count, dtype=torch.bool, device=self.device), torch.zeros(count, 0, device=self.device),
             zeros - 1, torch.zeros(count, LOOK_BINS, dtype=torch.bool, device=self.device),
         )  # fmt: skip
-        return self.remember(dataclasses.replace(state, view=self.views(state.body, goal, scene)))
+        state = dataclasses.replace(state, view=self.views(state.body, goal, scene))
+        return self.remember(state, goal_in_view(state.view), head_yaw(head_pose(state.body).rotation))
 
-    def remember(self, state: ClopsNavState) -> ClopsNavState:
-        """The state with its current view remembered: `seen_at` if the goal is in view, the view's yaw bins `looked`."""
-        yaw = head_yaw(head_pose(state.body).rotation)
-        seen_at = torch.where(goal_in_view(state.view), state.frame, state.seen_at)
+    def remember(self, state: ClopsNavState, visible: torch.Tensor, yaw: torch.Tensor) -> ClopsNavState:
+        """The state with its current view remembered: `seen_at` where the goal is `visible` (N,) bool, the yaw bins
+        `looked` of the views' yaw (N,) radians."""
+        seen_at = torch.where(visible, state.frame, state.seen_at)
         return dataclasses.replace(state, seen_at=seen_at, looked=state.looked | looked_bins(yaw, self.config.fov))
 
     def views(self, body: WandrState, goal: torch.Tensor, scene: torch.Tensor) -> torch.Tensor:
@@ -464,7 +465,7 @@ class ClopsNavCore:
         state = dataclasses.replace(state, **body._asdict(), frame=frame, actions=state.actions + 1,
                                     collided=state.collided + collided.long(), lowest_id=lowest_id, lowest_xy=lowest_xy,
                                     skated=skated, view=view)  # fmt: skip
-        state = self.remember(state)
+        state = self.remember(state, visible, head_yaw(end_head.rotation))
         found = goal_found(state.distance, visible, config.success_distance)
         state = dataclasses.replace(state, found=found)
         left = self.left_room(state) & ~found

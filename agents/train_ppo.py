@@ -62,7 +62,8 @@ class PPOTrainConfig:
     log_std_init: float = -1.0
     """Initial log σ of the policy (SB3: 0). Data latents have an rms of ~0.35; σ = 1 drowns them."""
     init: str = "data"
-    """"data": the actor starts from the data's latents (`agents.behaviour_cloning`); "scratch": random."""
+    """"data": the actor starts from the data's latents (`agents.behaviour_cloning`); "scratch": random; or the
+    path of a trained policy (.zip, same env and network) to fine-tune, e.g. with another reward."""
     clone_epochs: int = 40
     bootstrap_truncation: bool = False
     """SB3's γ·V(s) at time-limit ends; off: the paper's Monte-Carlo returns (see `NativeVecEnv`)."""
@@ -78,8 +79,8 @@ class PPOTrainConfig:
     command: str = ""
 
     def __post_init__(self) -> None:
-        if self.init not in ("data", "scratch"):
-            raise ValueError(f"init must be 'data' or 'scratch', got {self.init!r}")
+        if self.init not in ("data", "scratch") and not Path(self.init).is_file():
+            raise ValueError(f"init must be 'data', 'scratch' or a policy file, got {self.init!r} (no such file)")
         if self.ship not in ("best", "last"):
             raise ValueError(f"ship must be 'best' or 'last', got {self.ship!r}")
         if self.anchor > 0 and self.init != "data":
@@ -150,6 +151,10 @@ def train_ppo(config: PPOTrainConfig, clone_from: GoalWindows | None = None) -> 
     if checkpoint.exists():
         model = PPOKL.load(checkpoint, env=venv, device="cpu")
         print(f"resuming {checkpoint} at {model.num_timesteps} steps", file=sys.stderr)
+    elif config.init not in ("data", "scratch"):
+        model = PPOKL.load(config.init, env=venv, device="cpu", tensorboard_log=str(config.run_dir / "tensorboard"),
+                           learning_rate=config.learning_rate, kl_prior_coef=config.alpha)  # fmt: skip
+        model.num_timesteps = 0  # this run's steps, from the loaded policy
     else:
         width = config.net_width
         model = PPOKL("MlpPolicy", venv, kl_prior_coef=config.alpha, anchor_coef=config.anchor, n_steps=config.n_steps,

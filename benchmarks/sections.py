@@ -19,3 +19,21 @@ def replace_section(path: Path, section: str, title: str = "# Throughput") -> No
     else:
         text = text.rstrip() + "\n\n" + section
     atomic_write(path, lambda file: file.write(text.encode()))
+
+
+def replace_rows(path: Path, rows: dict[str, str], insert_before: str, note: str) -> None:
+    """Rewrite the markdown table rows of `path` whose first cell is a key of `rows` ({label: whole row line});
+    labels not yet in the table go before the first line starting with `insert_before`. `note` is added as a
+    line after the table's header paragraph (what was rerun, where). Atomic."""
+    if not path.exists():
+        raise FileNotFoundError(f"{path} does not exist: run the whole benchmark once before rerunning rows")
+    lines = path.read_text().split("\n")
+    for label, row in rows.items():
+        found = [i for i, line in enumerate(lines) if line.startswith(f"| {label} |")]
+        if found:
+            lines[found[0]] = row
+        else:
+            lines.insert(next(i for i, line in enumerate(lines) if line.startswith(insert_before)), row)
+    table = next(i for i, line in enumerate(lines) if line.startswith("|"))
+    lines.insert(table - 1, note)
+    atomic_write(path, lambda file: file.write("\n".join(lines).encode()))

@@ -36,7 +36,9 @@ on every ablation / data variant whose weights are in `runs/wandr_weights/`
 latent optimisation (`baselines.latent_optimisation`: "VAE + opt" with a
 zero intention from random latents, "WANDR + opt" refining the sampler's
 latents) on 2 start poses × 1 sample (250 rollouts: it backpropagates
-through 240 frames, ~5 min a row on 2 cores); a shipped WandrReach PPO policy if there is one; and
+through 240 frames, ~5 min a row on 2 cores); every shipped WandrReach PPO policy, twice: with
+sampled latents (the policy's σ ≈ 0.96, held near N(0, I) by the α·KL term, as GAMMA's protocol) and
+with its mean latent (SB3's deterministic evaluation), which slides far less; and
 the data's own FS (test clips, when the mocap cache can be built). Writes
 `benchmarks/results/wandr_grid.md`, `wandr_grid.png` (the paper's Figure 5:
 SR by height, angle and distance) and the prior's decode throughput into
@@ -56,10 +58,10 @@ import torch
 from baselines.latent_optimisation import LatentSequence, optimise_latents
 from baselines.wandr_sampler import Controller, WandrSampler, roll_out
 from benchmarks.machine import machine_line
-from benchmarks.sections import replace_section
+from benchmarks.sections import replace_rows, replace_section
 from motion_envs.atomic import atomic_write
 from motion_envs.envs.wandr_reach import WandrReachConfig, WandrReachCore, WandrReachState
-from motion_envs.priors.train_wandr import load_wandr
+from motion_envs.priors.train_wandr import WandrClips, load_wandr
 from motion_envs.priors.training import WEIGHTS_DIR
 from motion_envs.priors.wandr import WandrStepper
 from motion_envs.priors.wandr_features import FPS
@@ -140,19 +142,35 @@ def optimisation_row(prior_path: Path, intentions: tuple[str, ...] | None, seed:
     return {**row, "seconds": row["seconds"] + seconds}
 
 
+def motion_30fps(subsets: tuple[str, ...] = ("cmu",)):
+    """The 30 fps `MotionDataset`, or None (said why) when the mocap cache cannot be built here."""
+    from motion_envs.data.build import build
+    from motion_envs.data.dataset import MotionDataset
+
+    try:
+        return MotionDataset.load(build(subsets=subsets, fps_list=(FPS,)).caches[FPS])
+    except (FileNotFoundError, OSError) as error:
+        print(f"no mocap: {error}")
+        return None
+
+
+def training_clips() -> WandrClips | None:
+    """The shipped prior's training clips (CMU, mirrored included), or None without the mocap."""
+    from motion_envs.body import BodyModel
+
+    dataset = motion_30fps()
+    return None if dataset is None else WandrClips.from_dataset(dataset, "train", BodyModel(), mirrored=True)
+
+
 def data_skating(subsets: tuple[str, ...] = ("cmu",)) -> float | None:
     """FS (%) of the test clips at 30 fps, or None when the mocap cache cannot be built here."""
     from motion_envs.body import BodyModel
     from motion_envs.body.markers import foot_vertex_ids
-    from motion_envs.data.build import build
     from motion_envs.data.canonical import body_tensors
-    from motion_envs.data.dataset import MotionDataset
     from motion_envs.metrics import foot_skating
 
-    try:
-        dataset = MotionDataset.load(build(subsets=subsets, fps_list=(30,)).caches[30])
-    except (FileNotFoundError, OSError) as error:
-        print(f"data FS skipped: {error}")
+    dataset = motion_30fps(subsets)
+    if dataset is None:
         return None
     body, ids, skated, frames = BodyModel(), foot_vertex_ids(), 0.0, 0
     with torch.no_grad():
@@ -201,9 +219,16 @@ def figure(by_cell: dict[str, dict[str, np.ndarray]], path: Path, title: str) ->
     save(figure_, path, dpi=110)
 
 
+def table_row(label: str, row: dict) -> str:
+    return f"| {label} | {row['SR']:.1f} | {row['FS']:.1f} | {row['DTG']:.1f} | {row['seconds']:.0f} |"
+
+
 def main(quick: bool = False, seed: int = 0, weights_dir: Path | None = None, policies: list[Path] | None = None,
-         data_fs: bool = True, optimisation: bool = True, variants_dir: Path = VARIANTS_DIR) -> int:  # fmt: skip
-    """Run every row, print the table, write the result files."""
+         data_fs: bool = True, optimisation: bool = True, variants_dir: Path = VARIANTS_DIR, only: str | None = None) -> int:  # fmt: skip
+    """Run every row, print the table, write the result files.
+
+    only: rerun just the grid rows whose label contains this text and rewrite those rows of the existing
+    table (e.g. a new policy, when the ablation weights of the last full run are not at hand)."""
     from agents.controllers import PolicyLatent
 
     poses, samples = (2, 1) if quick else (6, 5)
@@ -221,8 +246,12 @@ def main(quick: bool = False, seed: int = 0, weights_dir: Path | None = None, po
             runs[f"{label}, paced"] = (variants_dir / name, lambda: WandrSampler(seed=seed), True)
     for policy in policies if policies is not None else sorted(weights_dir.glob("ppo_wandrreach*.zip")):
         runs[f"PPO ({policy.stem})"] = (weights_dir / "wandr.pt", lambda p=policy: PolicyLatent(p, seed=seed), False)
+        runs[f"PPO ({policy.stem}), mean latent"] = (weights_dir / "wandr.pt",
+                                                     lambda p=policy: PolicyLatent(p, deterministic=True, seed=seed), False)  # fmt: skip
+    if only is not None:
+        runs = {label: run for label, run in runs.items() if only in label}
     if not runs:
-        raise FileNotFoundError(f"no WANDR weights in {weights_dir}")
+        raise FileNotFoundError(f"no WANDR weights in {weights_dir}" + (f" for rows matching {only!r}" if only else ""))
     by_cell: dict[str, dict[str, np.ndarray]] = {}
     for label, (prior_path, make_controller, paced) in runs.items():
         torch.manual_seed(seed)
@@ -233,6 +262,11 @@ def main(quick: bool = False, seed: int = 0, weights_dir: Path | None = None, po
               f"({rows[label]['seconds']:.0f} s)")  # fmt: skip
         if not by_cell or label == PACED_LABEL:
             by_cell[label] = success_by_cell(rows[label]["reached"], cells)
+    name = "wandr_grid_quick" if quick else "wandr_grid"
+    if only is not None:
+        replace_rows(RESULTS / f"{name}.md", {label: table_row(label, row) for label, row in rows.items()}, "| data",
+                     f"Rows containing '{only}' rerun by `motion-envs bench wandr --only '{only}'`: {machine_line()}")  # fmt: skip
+        return 0
     main_label = next(iter(by_cell))
     shipped = weights_dir / "wandr.pt"
     if shipped.exists():
@@ -254,7 +288,7 @@ def main(quick: bool = False, seed: int = 0, weights_dir: Path | None = None, po
              f"≤ 240 frames (8 s) each, one batch per row. `motion-envs bench wandr{' --quick' if quick else ''}`.",
              machine_line(), "", "| row | SR (%) | FS (%) | DTG (cm) | wall time (s) |", "|---|---|---|---|---|"]  # fmt: skip
     for label, row in rows.items():
-        lines.append(f"| {label} | {row['SR']:.1f} | {row['FS']:.1f} | {row['DTG']:.1f} | {row['seconds']:.0f} |")
+        lines.append(table_row(label, row))
     if data is not None:
         lines.append(f"| data (cmu test clips) | | {data:.1f} | | |")
     for label, (sr, fs, dtg) in PAPER_ROWS.items():
@@ -269,7 +303,6 @@ def main(quick: bool = False, seed: int = 0, weights_dir: Path | None = None, po
               f"env core step {throughput['env']:,.0f} body-frames/s (adds feet, rewards, goals).", ""]  # fmt: skip
     text = "\n".join(lines)
     print(text)
-    name = "wandr_grid_quick" if quick else "wandr_grid"
     RESULTS.mkdir(exist_ok=True)
     atomic_write(RESULTS / f"{name}.md", lambda file: file.write(text.encode()))
     figure(by_cell, RESULTS / f"{name}.png", f"WANDR sampler: success by goal position ({count} rollouts)")

@@ -63,7 +63,14 @@ def _bench_wandr(args: argparse.Namespace) -> int:
     from benchmarks.wandr_grid import main as wandr_grid
 
     return wandr_grid(quick=args.quick, seed=args.seed, data_fs=not args.no_data_fs, optimisation=not args.no_optimisation,
-                      variants_dir=args.variants_dir)  # fmt: skip
+                      variants_dir=args.variants_dir, only=args.only)  # fmt: skip
+
+
+def _bench_wandr_pace(args: argparse.Namespace) -> int:
+    from benchmarks.wandr_pace import main as wandr_pace
+    from motion_envs.priors.training import WEIGHTS_DIR
+
+    return wandr_pace(args.weights or [WEIGHTS_DIR / "wandr.pt"])
 
 
 def _bench_speed(args: argparse.Namespace) -> int:
@@ -240,7 +247,9 @@ def _train_wandr(args: argparse.Namespace) -> int:
     name = default_weights(model, subsets)
     given = {"epochs": args.epochs, "batch_size": args.batch_size, "window_stride": args.window_stride,
              "seed": args.seed, "max_rollout": args.max_rollout, "kl_weight": args.kl_weight,
-             "late_kl_weight": args.late_kl_weight, "kl_raise_epoch": args.kl_raise_epoch, "weights": args.weights or name, "run_dir": args.run_dir or Path("runs") / name.stem}  # fmt: skip
+             "late_kl_weight": args.late_kl_weight, "kl_raise_epoch": args.kl_raise_epoch, "weights": args.weights or name,
+             "run_dir": args.run_dir or Path("runs") / name.stem, "init": _prior_init(args),
+             "far_goal_probability": args.far_goal_probability}  # fmt: skip
     config = WandrTrainConfig(model=model, data_hash=dataset.path.stem, command="motion-envs " + " ".join(sys.argv[1:]),
                               **{key: value for key, value in given.items() if value is not None})  # fmt: skip
     entry = train_wandr(config, train_clips, validation_clips)
@@ -251,6 +260,11 @@ def _train_wandr(args: argparse.Namespace) -> int:
     return 0
 
 
+def _prior_init(args: argparse.Namespace) -> Path | None:
+    """--prior-init as a path (None for 'scratch' or when not given)."""
+    return None if args.prior_init in (None, "scratch") else Path(args.prior_init)
+
+
 def _train_clops(args: argparse.Namespace) -> int:
     from motion_envs.priors.clops import ClopsConfig
     from motion_envs.priors.train_clops import ClopsTrainConfig, train_clops
@@ -259,8 +273,8 @@ def _train_clops(args: argparse.Namespace) -> int:
     model = ClopsConfig(**{name: value for name, value in (("layers", args.layers), ("actions", args.actions)) if value})
     given = {"epochs": args.epochs, "batch_size": args.batch_size, "window_stride": args.window_stride, "seed": args.seed,
              "max_rollout": args.max_rollout, "kl_weight": args.kl_weight, "weights": args.weights, "run_dir": args.run_dir}  # fmt: skip
-    if args.clops_init is not None:
-        given["init"] = None if str(args.clops_init) == "scratch" else args.clops_init
+    if args.prior_init is not None:
+        given["init"] = _prior_init(args)
     config = ClopsTrainConfig(model=model, data_hash=dataset.path.stem, command="motion-envs " + " ".join(sys.argv[1:]),
                               **{key: value for key, value in given.items() if value is not None or key == "init"})  # fmt: skip
     entry = train_clops(config, train_clips, validation_clips)
@@ -373,8 +387,8 @@ def parser() -> argparse.ArgumentParser:
     train.add_argument("--alpha", type=float, default=None, help="ppo: weight of the KL-to-prior regulariser (paper: 1, 10)")
     train.add_argument("--num-envs", type=int, default=None, help="ppo, dqn: bodies stepped together")
     train.add_argument("--timesteps", type=int, default=None, help="ppo, dqn: total env steps (primitives; dqn: actions)")
-    train.add_argument("--init", choices=("data", "scratch"), default=None,
-                       help="ppo: start the actor from the data's latents (default) or from scratch")
+    train.add_argument("--init", default=None,
+                       help="ppo: start the actor from the data's latents ('data', default), from 'scratch', or from a policy .zip")
     train.add_argument("--log-std-init", type=float, default=None, help="ppo: initial log sigma of the policy (default -1)")
     train.add_argument("--learning-rate", type=float, default=None, help="ppo, dqn: Adam learning rate")
     train.add_argument("--n-steps", type=int, default=None, help="ppo: primitives per body per rollout")
@@ -393,7 +407,10 @@ def parser() -> argparse.ArgumentParser:
     train.add_argument("--goal-memory", action="store_true",
                        help="dqn: also observe a memory of what the view has shown (where the goal was last seen; ours)")
     train.add_argument("--actions", type=int, default=None, help="clops: k-means head-delta clusters K (default 16)")
-    train.add_argument("--clops-init", default=None, help="clops: WANDR weights to start from, or 'scratch' (default: shipped wandr.pt)")
+    train.add_argument("--far-goal-probability", type=float, default=None,
+                       help="wandr: share of training goals drawn ≥ 1.5 m away (default 0.5; the release: 1)")
+    train.add_argument("--prior-init", "--clops-init", dest="prior_init", default=None,
+                       help="wandr, clops: prior weights to start from, or 'scratch' (default: wandr scratch, clops the shipped wandr.pt)")
     train.add_argument("--seed", type=int, default=None)
     _add_data_args(train, ["cmu"])
     train.set_defaults(run=_train)
@@ -418,7 +435,12 @@ def parser() -> argparse.ArgumentParser:
     bench_wandr.add_argument("--no-optimisation", action="store_true", help="skip the latent-optimisation rows (slowest)")
     bench_wandr.add_argument("--variants-dir", type=Path, default=Path("runs/wandr_weights"),
                              help="ablation / data-variant weights to add as rows (not shipped)")
+    bench_wandr.add_argument("--only", default=None,
+                             help="rerun only the grid rows whose label contains this text (e.g. 'PPO') and rewrite them in the existing table")
     bench_wandr.set_defaults(run=_bench_wandr)
+    bench_pace = bench.add_parser("wandr-pace", help="does WANDR's prior keep the intention's pace on its own training windows?")
+    bench_pace.add_argument("--weights", type=Path, nargs="+", default=None, help="WANDR priors (default: the shipped one)")
+    bench_pace.set_defaults(run=_bench_wandr_pace)
     bench_clops = bench.add_parser("clops", help="CLOPS scene matrix: shipped ClopsNav policies on every family's test seeds")
     bench_clops.add_argument("--episodes", type=int, default=100, help="test seeds per family, one episode each (max 100)")
     bench_clops.add_argument("--families", default=None, help="comma-separated layout families (default: all five)")

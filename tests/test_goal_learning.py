@@ -95,5 +95,13 @@ def test_train_ppo_clones_the_data_then_resumes_and_ships(windows, tmp_path):
     manifest = json.loads((tmp_path / "w" / "manifest.json").read_text())
     assert manifest["policy.zip"]["kind"] == "ppo_policy" and "cloning" in manifest["policy.zip"]
     assert PPOKL.load(config.weights, device="cpu").kl_prior_coef == config.alpha
+    tuned = PPOTrainConfig(num_envs=4, n_steps=4, batch_size=16, n_epochs=1, total_timesteps=16, init=str(config.weights),
+                           learning_rate=1e-5, run_dir=tmp_path / "tune", weights=tmp_path / "w" / "tuned.zip")  # fmt: skip
+    assert train_ppo(tuned)["timesteps"] == 16  # a fine-tune counts its own steps from the loaded policy
+    start, end = (PPOKL.load(path, device="cpu").policy.state_dict() for path in (config.weights, tuned.weights))
+    assert all(torch.allclose(start[name], end[name], atol=0.05) for name in start)  # starts from it, not from scratch
+    assert PPOKL.load(tuned.weights, device="cpu").learning_rate == 1e-5
+    with pytest.raises(ValueError, match="policy file"):
+        PPOTrainConfig(init="runs/no_such_policy.zip")
     with pytest.raises(ValueError, match="ship"):
         PPOTrainConfig(ship="first")

@@ -6,6 +6,7 @@ import subprocess
 import sys
 
 import gymnasium as gym
+import pytest
 
 import motion_envs
 
@@ -40,3 +41,15 @@ def test_cli_reports_unknown_training_targets_clearly():
     )
     assert result.returncode == 2
     assert "invalid choice: 'clop'" in result.stderr and "dqn" in result.stderr
+
+
+def test_rerun_rows_replace_their_lines_insert_new_ones_and_keep_the_rest(tmp_path):
+    from benchmarks.sections import replace_rows
+
+    path = tmp_path / "grid.md"
+    path.write_text("# Grid\n\nMachine: A.\n\n| row | SR |\n|---|---|\n| sampler | 3 |\n| PPO (a) | 80 |\n| data | |\n")
+    replace_rows(path, {"PPO (a)": "| PPO (a) | 85 |", "PPO (b)": "| PPO (b) | 90 |"}, "| data", "Rows rerun: B.")
+    assert path.read_text() == ("# Grid\n\nMachine: A.\nRows rerun: B.\n\n| row | SR |\n|---|---|\n| sampler | 3 |\n"
+                                "| PPO (a) | 85 |\n| PPO (b) | 90 |\n| data | |\n")  # fmt: skip
+    with pytest.raises(FileNotFoundError, match="run the whole benchmark once"):
+        replace_rows(tmp_path / "missing.md", {}, "| data", "")

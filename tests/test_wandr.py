@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import gymnasium as gym
@@ -79,6 +80,8 @@ def test_a_tiny_training_run_lowers_its_loss(walking_motion_30fps, body, tmp_pat
     assert entry["validation_joint_error_cm_1_frame"] < 10.0
     prior = load_wandr(config.weights)
     assert prior.config.layers == 3 and torch.isfinite(prior.delta_std).all()
+    tuned = dataclasses.replace(config, epochs=1, init=config.weights, run_dir=tmp_path / "tune", weights=tmp_path / "tuned.pt")
+    assert train_wandr(tuned, clips, clips)["train_loss_by_epoch"][0] < losses[0]  # starts from the trained weights
 
 
 def test_goal_frames_lie_ahead_inside_the_clip(walking_motion_30fps, body):
@@ -215,3 +218,17 @@ def test_kl_weight_warms_up_then_rises_at_the_chosen_epoch():
     assert config.kl_beta(10_000, 4) == 0.01 and config.kl_beta(10_000, 5) == 0.1
     assert WandrTrainConfig().kl_beta(10_000, 39) == 0.01  # the paper's β throughout by default
     assert [config.rollout_limit(epoch) for epoch in (0, 10, 20, 39)] == [1, 5, 10, 10]
+
+
+def test_pace_check_rolls_the_prior_towards_a_goal_due_at_the_window_end(walking_motion_30fps, body, shipped):
+    from benchmarks.wandr_pace import far_windows, pace
+    from motion_envs.priors.wandr import WandrStepper
+
+    clips = WandrClips.from_motions([walking_motion_30fps], body)
+    starts = far_windows(clips, horizon=60, min_travel=1.0)
+    travel = (clips.joints[starts + 60, PELVIS, :2] - clips.joints[starts, PELVIS, :2]).norm(dim=-1)
+    assert len(starts) > 0 and (travel > 1.0).all()
+    left, wrist = pace(WandrStepper(shipped, body), clips, starts, horizon=60, sigma=1.0)
+    assert left.shape == (2, len(starts)) and wrist.shape == (len(starts),)
+    start_distance = (clips.joints[starts, PELVIS, :2] - clips.joints[starts + 60, RIGHT_WRIST, :2]).norm(dim=-1)
+    assert (left[-1] < start_distance).float().mean() > 0.8  # the prior walks towards the goal

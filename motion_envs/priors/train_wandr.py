@@ -78,6 +78,8 @@ class WandrTrainConfig(TrainRun):
     kl_raise_epoch: int = 0
     free_bits: float = 0.05
     window_stride: int = 1
+    init: Path | None = None
+    """Prior weights of the same network to start from (None: from scratch)."""
     run_dir: Path = Path("runs/wandr")
 
     def rollout_limit(self, epoch: int) -> int:
@@ -265,6 +267,8 @@ def train_wandr(config: WandrTrainConfig, train: WandrClips, validation: WandrCl
     """Train (or resume) WANDR's prior; returns the manifest entry it writes."""
     seed_everything(config.seed)
     model = WandrPrior(config.model)
+    if config.init is not None:
+        model.load_state_dict(load_wandr(config.init).state_dict())
     return train_delta_prior(model, WANDR_KIND, config, train, validation, lambda clips: WristGoals(clips, config),
                              config.weights or default_weights(config.model))  # fmt: skip
 

@@ -1,0 +1,96 @@
+"""Does WANDR's prior keep the pace its wrist intention asks for? (`motion-envs bench wandr-pace`)
+
+The grid's 8-s sampler fails (3.5% SR) because the body falls behind the
+deadline and cannot catch up (`benchmarks.wandr_grid`). This check removes
+every out-of-distribution factor: it takes the prior's own *training*
+windows (CMU, 30 fps) in which the pelvis travels more than `min_travel`
+in `horizon` frames, gives the prior the data's start state and, as the
+goal, the right wrist at the window's last frame due at that frame (I^w's
+t_G), and rolls out the intention loop (`WandrStepper`, as WandrReach) with
+z ~ N(0, I) and with z = 0. Per second it prints the median ground distance
+from the pelvis to the goal for the data and for each prior: a prior that
+follows its intention tracks the data's column.
+
+Writes `benchmarks/results/wandr_pace.md`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import torch
+
+from benchmarks.machine import machine_line
+from motion_envs.atomic import atomic_write
+from motion_envs.body import BodyModel
+from motion_envs.priors.train_wandr import WandrClips, load_wandr
+from motion_envs.priors.wandr import WandrStepper
+from motion_envs.priors.wandr_features import FPS, PELVIS, RIGHT_WRIST
+
+RESULTS = Path(__file__).resolve().parent / "results"
+
+
+def far_windows(clips: WandrClips, horizon: int, min_travel: float, stride: int = 5) -> torch.Tensor:
+    """(W,) window starts whose pelvis moves more than `min_travel` m on the ground over `horizon` frames."""
+    starts = clips.window_starts(horizon, stride)
+    travel = (clips.joints[starts + horizon, PELVIS, :2] - clips.joints[starts, PELVIS, :2]).norm(dim=-1)
+    return starts[travel > min_travel]
+
+
+@torch.no_grad()
+def pace(stepper: WandrStepper, clips: WandrClips, starts: torch.Tensor, horizon: int, sigma: float,
+         seed: int = 0) -> tuple[torch.Tensor, torch.Tensor]:  # fmt: skip
+    """Roll the prior out from the data at `starts` (W,) towards the wrist at `starts + horizon`, due then.
+
+    Returns the pelvis-to-goal ground distance (horizon // FPS, W) at the end of every second, and the final
+    wrist-to-goal distance (W,), metres.
+    """
+    goal_frames = starts + horizon
+    goal = clips.joints[goal_frames, RIGHT_WRIST]
+    generator = torch.Generator().manual_seed(seed)
+    state, seconds = clips.state(starts), []
+    for frame in range(1, horizon + 1):
+        z = sigma * torch.randn(len(starts), stepper.prior.config.latent, generator=generator)
+        state, _ = stepper.step(state, z, goal, goal_frames - (starts + frame - 1))
+        if frame % FPS == 0:
+            seconds.append((state.joints[:, PELVIS, :2] - goal[:, :2]).norm(dim=-1))
+    return torch.stack(seconds), (state.joints[:, RIGHT_WRIST] - goal).norm(dim=-1)
+
+
+def main(weights: list[Path], horizon_s: int = 6, min_travel: float = 2.0) -> int:
+    """Print and write the pace table for each prior in `weights` (default: the shipped one)."""
+    from benchmarks.wandr_grid import training_clips
+
+    clips = training_clips()
+    if clips is None:
+        return 1
+    horizon = horizon_s * FPS
+    starts = far_windows(clips, horizon, min_travel)
+    if len(starts) == 0:
+        raise ValueError(f"no training window travels more than {min_travel} m in {horizon_s} s")
+    goal = clips.joints[starts + horizon, RIGHT_WRIST, :2]
+    data = torch.stack([(clips.joints[starts + s * FPS, PELVIS, :2] - goal).norm(dim=-1) for s in range(1, horizon_s + 1)])
+    columns = {"data": data.median(1).values}
+    reached = {}
+    body = BodyModel()
+    for path in weights:
+        stepper = WandrStepper(load_wandr(path).eval(), body)
+        for sigma, name in ((1.0, "z ~ N(0, I)"), (0.0, "z = 0")):
+            left, wrist = pace(stepper, clips, starts, horizon, sigma)
+            label = f"{path.stem}, {name}"
+            columns[label] = left.median(1).values
+            reached[label] = 100 * float((wrist < 0.1).float().mean())
+    lines = ["# WANDR pace on the prior's own training windows", "",
+             f"{len(starts)} CMU training windows (mirrored included) whose pelvis travels > {min_travel} m in {horizon_s} s; "
+             f"goal: the right wrist at the window's end, due then. Median pelvis-to-goal ground distance (m) at the end of "
+             f"each second. `motion-envs bench wandr-pace`.", machine_line(), "",
+             "| s | " + " | ".join(columns) + " |", "|---" * (len(columns) + 1) + "|"]  # fmt: skip
+    for second in range(horizon_s):
+        lines.append(f"| {second + 1} | " + " | ".join(f"{values[second]:.2f}" for values in columns.values()) + " |")
+    lines += ["", "Wrist within 10 cm of the goal at the deadline: "
+              + ", ".join(f"{label} {rate:.0f}%" for label, rate in reached.items()) + ".", ""]  # fmt: skip
+    text = "\n".join(lines)
+    print(text)
+    RESULTS.mkdir(exist_ok=True)
+    atomic_write(RESULTS / "wandr_pace.md", lambda file: file.write(text.encode()))
+    return 0

@@ -23,17 +23,22 @@ def replace_section(path: Path, section: str, title: str = "# Throughput") -> No
 
 def replace_rows(path: Path, rows: dict[str, str], insert_before: str, note: str) -> None:
     """Rewrite the markdown table rows of `path` whose first cell is a key of `rows` ({label: whole row line});
-    labels not yet in the table go before the first line starting with `insert_before`. `note` is added as a
-    line after the table's header paragraph (what was rerun, where). Atomic."""
+    a label not yet in the table goes after the row before it in `rows`, or else before the first line starting
+    with `insert_before`. `note` is added as a line after the table's header paragraph (what was rerun, where).
+    Atomic."""
     if not path.exists():
         raise FileNotFoundError(f"{path} does not exist: run the whole benchmark once before rerunning rows")
     lines = path.read_text().split("\n")
+    previous = None
     for label, row in rows.items():
         found = [i for i, line in enumerate(lines) if line.startswith(f"| {label} |")]
         if found:
             lines[found[0]] = row
+        elif previous is not None:
+            lines.insert(lines.index(previous) + 1, row)
         else:
             lines.insert(next(i for i, line in enumerate(lines) if line.startswith(insert_before)), row)
+        previous = row
     table = next(i for i, line in enumerate(lines) if line.startswith("|"))
     lines.insert(table - 1, note)
     atomic_write(path, lambda file: file.write("\n".join(lines).encode()))

@@ -29,6 +29,18 @@ mean (what ClopsNav decodes, `ClopsNavConfig.latent_scale`). On the full
 grid σ = 0.5 gave 60.3% / 70.9% (SR / FS), and slower paces at σ = 1 lower
 FS less than SR (1 s + d / 0.9 m/s: 57.9% / 76.5%).
 
+Attempts to make the 8-s sampler work, each fine-tuned from the shipped
+prior (`train wandr --prior-init`) and scored on 500 rollouts (2 poses ×
+2 samples; 8-s SR / FS, then paced SR / FS; shipped: 2.8 / 71.6,
+63.2 / 80.9): KL weight β = 1 for 8 epochs 4.4 / 93.7, 43.8 / 93.4;
+β = 0.3: 3.6 / 87.7, 58.2 / 87.9; 10 more epochs as shipped
+2.6 / 77.2, 62.2 / 83.6; every training goal ≥ 1.5 m away (the release)
+3.4 / 70.3, 63.8 / 81.8; the clips time-warped to 0.6× and 0.8× pace as
+well (not kept) 3.6 / 67.1, 62.8 / 79.3; 30-frame training rollouts
+3.6 / 70.3, 65.8 / 83.7, and with β = 0.3 4.8 / 74.8, 72.4 / 84.2.
+`benchmarks.wandr_pace` shows why: the prior lags its own intention on
+the windows it was trained on.
+
 Rows: the WANDR sampler (z ~ N(0, I) every frame) on the shipped prior and
 on every ablation / data variant whose weights are in `runs/wandr_weights/`
 (`--variants-dir`; they are trained with `motion-envs train wandr

@@ -47,9 +47,9 @@ def test_rerun_rows_replace_their_lines_insert_new_ones_and_keep_the_rest(tmp_pa
     from benchmarks.sections import replace_rows
 
     path = tmp_path / "grid.md"
-    path.write_text("# Grid\n\nMachine: A.\n\n| row | SR |\n|---|---|\n| sampler | 3 |\n| PPO (a) | 80 |\n| data | |\n")
-    replace_rows(path, {"PPO (a)": "| PPO (a) | 85 |", "PPO (b)": "| PPO (b) | 90 |"}, "| data", "Rows rerun: B.")
+    path.write_text("# Grid\n\nMachine: A.\n\n| row | SR |\n|---|---|\n| sampler | 3 |\n| PPO (a) | 80 |\n| opt | 2 |\n| data | |\n")
+    replace_rows(path, {"new": "| new | 1 |", "PPO (a)": "| PPO (a) | 85 |", "PPO (b)": "| PPO (b) | 90 |"}, "| data", "Rows rerun: B.")
     assert path.read_text() == ("# Grid\n\nMachine: A.\nRows rerun: B.\n\n| row | SR |\n|---|---|\n| sampler | 3 |\n"
-                                "| PPO (a) | 85 |\n| PPO (b) | 90 |\n| data | |\n")  # fmt: skip
+                                "| PPO (a) | 85 |\n| PPO (b) | 90 |\n| opt | 2 |\n| new | 1 |\n| data | |\n")  # fmt: skip
     with pytest.raises(FileNotFoundError, match="run the whole benchmark once"):
         replace_rows(tmp_path / "missing.md", {}, "| data", "")

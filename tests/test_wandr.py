@@ -228,7 +228,8 @@ def test_pace_check_rolls_the_prior_towards_a_goal_due_at_the_window_end(walking
     starts = far_windows(clips, horizon=60, min_travel=1.0)
     travel = (clips.joints[starts + 60, PELVIS, :2] - clips.joints[starts, PELVIS, :2]).norm(dim=-1)
     assert len(starts) > 0 and (travel > 1.0).all()
-    left, wrist = pace(WandrStepper(shipped, body), clips, starts, horizon=60, sigma=1.0)
-    assert left.shape == (2, len(starts)) and wrist.shape == (len(starts),)
+    left, walked, wrist = pace(WandrStepper(shipped, body), clips, starts, horizon=60, sigma=1.0)
+    assert left.shape == walked.shape == (2, len(starts)) and wrist.shape == (len(starts),)
+    assert (walked[1] > walked[0]).all() and (walked[1] >= (left[0] - left[1]).abs() - 1e-4).all()  # a path, not a jump
     start_distance = (clips.joints[starts, PELVIS, :2] - clips.joints[starts + 60, RIGHT_WRIST, :2]).norm(dim=-1)
     assert (left[-1] < start_distance).float().mean() > 0.8  # the prior walks towards the goal

@@ -153,7 +153,8 @@ def train_ppo(config: PPOTrainConfig, clone_from: GoalWindows | None = None) -> 
         print(f"resuming {checkpoint} at {model.num_timesteps} steps", file=sys.stderr)
     elif config.init not in ("data", "scratch"):
         model = PPOKL.load(config.init, env=venv, device="cpu", tensorboard_log=str(config.run_dir / "tensorboard"),
-                           learning_rate=config.learning_rate, kl_prior_coef=config.alpha)  # fmt: skip
+                           learning_rate=config.learning_rate, kl_prior_coef=config.alpha, n_steps=config.n_steps,
+                           batch_size=config.batch_size, n_epochs=config.n_epochs)  # this run's settings; fmt: skip
         model.num_timesteps = 0  # this run's steps, from the loaded policy
     else:
         width = config.net_width

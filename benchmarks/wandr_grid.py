@@ -74,6 +74,7 @@ from baselines.wandr_sampler import Controller, WandrSampler, roll_out
 from benchmarks.machine import machine_line
 from benchmarks.sections import replace_rows, replace_section
 from motion_envs.atomic import atomic_write
+from motion_envs.data.dataset import MotionDataset
 from motion_envs.envs.wandr_reach import WandrReachConfig, WandrReachCore, WandrReachState
 from motion_envs.priors.train_wandr import WandrClips, load_wandr
 from motion_envs.priors.training import WEIGHTS_DIR
@@ -156,10 +157,9 @@ def optimisation_row(prior_path: Path, intentions: tuple[str, ...] | None, seed:
     return {**row, "seconds": row["seconds"] + seconds}
 
 
-def motion_30fps(subsets: tuple[str, ...] = ("cmu",)):
+def motion_30fps(subsets: tuple[str, ...] = ("cmu",)) -> MotionDataset | None:
     """The 30 fps `MotionDataset`, or None (said why) when the mocap cache cannot be built here."""
     from motion_envs.data.build import build
-    from motion_envs.data.dataset import MotionDataset
 
     try:
         return MotionDataset.load(build(subsets=subsets, fps_list=(FPS,)).caches[FPS])

@@ -4,8 +4,9 @@ GammaReach-v0: one episode of the shipped α = 1 PPO policy (seed 3), four
 frames of its ray-cast video side by side -> `docs/gamma_reach.png`.
 WandrReach-v0: the shipped PPO policy reaching a goal 2 m ahead and to the
 left at chest height (seed 0) -> `docs/wandr_reach.png`.
-ClopsNav-v0: the shipped DQN policy (trained on `open`) in a held-out open
-room, the egocentric view after each action inset -> `docs/clops_nav.png`.
+ClopsNav-v0: the shipped DQN policy with the goal memory (trained on
+`open`) in a held-out open room, the egocentric view after each action
+inset -> `docs/clops_nav.png`.
 Scenes: the first held-out room of each layout family seen from above with a
 body and its goal, and under it what the body's head camera sees (semantic
 colours, depth, goal mask at 64 × 64, shown 2×) -> `docs/scenes.png`.
@@ -34,7 +35,7 @@ from motion_envs.scenes import FAMILIES, TEST_SEEDS, make_scene
 DOCS = Path(__file__).resolve().parent.parent / "docs"
 POLICY = WEIGHTS_DIR / "ppo_gammareach_alpha1_paper.zip"
 WANDR_POLICY = WEIGHTS_DIR / "ppo_wandrreach_alpha1_default.zip"
-CLOPS_POLICY = WEIGHTS_DIR / "dqn_clopsnav_open.zip"
+CLOPS_POLICY = WEIGHTS_DIR / "dqn_clopsnav_open_memory.zip"
 
 
 def episode_strip(env_id: str, destination: Path, seed: int, crop: tuple[int, int] = (40, 40), **play_kwargs) -> Path:
@@ -59,7 +60,8 @@ def wandr_reach_strip(destination: Path = DOCS / "wandr_reach.png", seed: int = 
 
 
 def clops_nav_strip(destination: Path = DOCS / "clops_nav.png", seed: int = 3) -> Path:
-    return episode_strip("motion_envs/ClopsNav-v0", destination, seed, crop=(0, 60), policy=CLOPS_POLICY, split="test")
+    return episode_strip("motion_envs/ClopsNav-v0", destination, seed, crop=(0, 60), policy=CLOPS_POLICY, split="test",
+                         goal_memory=True)  # fmt: skip
 
 
 def scene_tile(family: str, body: BodyModel, seed: int = TEST_SEEDS[0]) -> np.ndarray:

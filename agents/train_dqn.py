@@ -31,6 +31,10 @@ from agents.vec_env import NativeVecEnv
 from motion_envs.priors.training import WEIGHTS_DIR
 
 
+OBSERVATION_OPTIONS = {"": {}, "_known_goal": {"known_goal": True}, "_memory": {"goal_memory": True}}
+"""Policy-file suffix -> the ClopsNav observation options its policy was trained with."""
+
+
 @dataclass
 class DQNTrainConfig:
     env_id: str = "motion_envs/ClopsNav-v0"
@@ -63,7 +67,10 @@ class DQNTrainConfig:
     command: str = ""
 
     def weights_path(self) -> Path:
-        suffix = "_known_goal" if self.known_goal else "_memory" if self.goal_memory else ""
+        options = {name: True for name in ("known_goal", "goal_memory") if getattr(self, name)}
+        suffix = next((suffix for suffix, trained in OBSERVATION_OPTIONS.items() if trained == options), None)
+        if suffix is None:
+            raise ValueError(f"no policy name for the observation options {options}: choose at most one")
         return self.weights or WEIGHTS_DIR / f"dqn_clopsnav_{self.family}{suffix}.zip"
 
 

@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from agents.train_dqn import OBSERVATION_OPTIONS
 from benchmarks.machine import machine_line
 from benchmarks.sections import replace_section
 from motion_envs.atomic import atomic_write
@@ -50,10 +51,8 @@ PAPER_TABLE2 = {  # SR %, Col %, FS %
 PAPER_SR_MATRIX = [[93, 84, 96, 78, 85], [78, 87, 93, 73, 78], [81, 72, 84, 72, 72], [90, 84, 94, 78, 73], [87, 78, 90, 66, 68]]
 PAPER_COL_MATRIX = [[26, 16, 35, 42, 40], [42, 10, 35, 43, 43], [40, 20, 19, 45, 38], [39, 20, 35, 38, 38], [39, 17, 36, 40, 27]]
 GAMMA_POLICY = WEIGHTS_DIR / "ppo_gammareach_alpha1_paper.zip"
-OBSERVATIONS = {  # policy-name suffix -> (row-label suffix, the env's observation options)
-    "": ("", {}),
-    "_known_goal": (" + known goal", {"known_goal": True}),
-    "_memory": (" + goal memory", {"goal_memory": True}),
+OBSERVATIONS = {  # policy-name suffix -> (row-label suffix, e.g. " + known goal", the env's observation options)
+    suffix: ("".join(f" + {name.replace('_', ' ')}" for name in options), options) for suffix, options in OBSERVATION_OPTIONS.items()
 }
 
 Controller = Callable[[ClopsNavCore, ClopsNavState], torch.Tensor]

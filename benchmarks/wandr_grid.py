@@ -38,8 +38,9 @@ prior (`train wandr --prior-init`) and scored on 500 rollouts (2 poses ×
 3.4 / 70.3, 63.8 / 81.8; the clips time-warped to 0.6× and 0.8× pace as
 well (not kept) 3.6 / 67.1, 62.8 / 79.3; 30-frame training rollouts
 3.6 / 70.3, 65.8 / 83.7, and with β = 0.3 4.8 / 74.8, 72.4 / 84.2; a
-learned conditional prior p(z | c) in place of N(0, I) (10 epochs; code
-not kept) 2.6 / 84.3, 56.8 / 88.3. Trained from scratch with the shipped
+learned conditional prior p(z | c) in place of N(0, I) (`--learned-prior`,
+10 epochs) 2.6 / 84.3, 56.8 / 88.3, and trained from scratch with it
+(40 epochs) 0.8 / 69.0, 72.0 / 76.0 (z = 0 paced: 63.6 / 65.1). Trained from scratch with the shipped
 recipe but every goal ≥ 1.5 m away: 3.2 / 65.6, 65.0 / 79.8.
 `benchmarks.wandr_pace` shows why: the prior lags its own intention on
 the windows it was trained on.

@@ -243,7 +243,7 @@ def _train_wandr(args: argparse.Namespace) -> int:
     subsets = tuple(dict.fromkeys(args.subset))  # `--subset hdm05` adds to the default cmu
     dataset, train_clips, validation_clips = _delta_prior_clips(args)
     intentions = tuple(args.intentions.split(",")) if args.intentions else WandrConfig().intentions
-    model = WandrConfig(intentions=intentions, **({"layers": args.layers} if args.layers else {}))
+    model = WandrConfig(intentions=intentions, learned_prior=args.learned_prior, **({"layers": args.layers} if args.layers else {}))
     name = default_weights(model, subsets)
     given = {"epochs": args.epochs, "batch_size": args.batch_size, "window_stride": args.window_stride,
              "seed": args.seed, "max_rollout": args.max_rollout, "kl_weight": args.kl_weight,
@@ -407,6 +407,8 @@ def parser() -> argparse.ArgumentParser:
     train.add_argument("--goal-memory", action="store_true",
                        help="dqn: also observe a memory of what the view has shown (where the goal was last seen; ours)")
     train.add_argument("--actions", type=int, default=None, help="clops: k-means head-delta clusters K (default 16)")
+    train.add_argument("--learned-prior", action="store_true",
+                       help="wandr: a conditional prior p(z | c) instead of N(0, I) (ours; samplers still draw N(0, I) noise)")
     train.add_argument("--far-goal-probability", type=float, default=None,
                        help="wandr: share of training goals drawn ≥ 1.5 m away (default 0.5; the release: 1)")
     train.add_argument("--prior-init", "--clops-init", dest="prior_init", default=None,

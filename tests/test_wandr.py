@@ -233,3 +233,23 @@ def test_pace_check_rolls_the_prior_towards_a_goal_due_at_the_window_end(walking
     assert (walked[1] > walked[0]).all() and (walked[1] >= (left[0] - left[1]).abs() - 1e-4).all()  # a path, not a jump
     start_distance = (clips.joints[starts, PELVIS, :2] - clips.joints[starts + 60, RIGHT_WRIST, :2]).norm(dim=-1)
     assert (left[-1] < start_distance).float().mean() > 0.8  # the prior walks towards the goal
+
+
+def test_a_learned_prior_starts_as_n01_then_learns_from_the_condition(walking_motion_30fps, body, tmp_path):
+    clips = WandrClips.from_motions([walking_motion_30fps], body)
+    config = WandrTrainConfig(model=WandrConfig(layers=3, max_width=64, learned_prior=True), epochs=3, batch_size=16,
+                              max_rollout=1, run_dir=tmp_path / "run", weights=tmp_path / "lp.pt")  # fmt: skip
+    fresh = WandrPrior(config.model).eval()
+    condition_batch = torch.randn(5, fresh.condition_mean.shape[0])
+    noise = torch.randn(5, fresh.config.latent)
+    assert torch.equal(fresh.generate(noise, condition_batch), fresh.decode(noise, condition_batch))  # p(z | c) = N(0, I)
+    train_wandr(config, clips, clips)
+    trained = load_wandr(config.weights).eval()
+    assert trained.config.learned_prior
+    mean, log_variance = trained.prior(condition_batch)
+    assert mean.abs().max() > 1e-3 and torch.isfinite(log_variance).all()
+    assert not torch.allclose(trained.generate(noise, condition_batch), trained.decode(noise, condition_batch))
+    plain = dataclasses.replace(config, model=WandrConfig(layers=3, max_width=64), epochs=1, init=config.weights,
+                                run_dir=tmp_path / "plain", weights=tmp_path / "plain.pt")  # fmt: skip
+    with pytest.raises(ValueError, match="not the same network"):  # a prior network cannot be dropped silently
+        train_wandr(plain, clips, clips)

@@ -140,7 +140,7 @@ class ClopsStepper(WandrStepper):
 
     def step_towards(self, state: WandrState, z: torch.Tensor, target: HeadPose) -> tuple[WandrState, torch.Tensor]:
         """The next frame of bodies decoded with latents z (B, latent), and its foot vertices (B, V, 3)."""
-        delta = self.prior.denormalise_delta(self.prior.decode(z, self.head_condition(state, target)))
+        delta = self.prior.denormalise_delta(self.prior.generate(z, self.head_condition(state, target)))
         transl, orient, pose = integrate(state.transl, state.orient, state.pose, delta)
         following, posed = make_state(self.body, transl, orient, pose, delta)
         return self.grounded(following, self.feet(posed))

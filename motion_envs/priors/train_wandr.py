@@ -210,7 +210,9 @@ def rollout_terms(model: WandrPrior, clips: WandrClips, targets: HindsightTarget
         predicted = model.decode(z, cond)
         squared = (predicted - target) ** 2
         totals["recon"] = totals["recon"] + squared[:, :3].mean() + squared[:, 3:9].mean() + squared[:, 9:].mean()
-        kl_per_dim = 0.5 * (mean**2 + log_variance.exp() - 1 - log_variance).mean(0)
+        prior_mean, prior_log_variance = model.prior(cond)  # KL(q(z | c, d) ‖ p(z | c)), p = N(0, I) for WANDR
+        kl_per_dim = 0.5 * (((mean - prior_mean) ** 2 + log_variance.exp()) / prior_log_variance.exp() - 1
+                            - log_variance + prior_log_variance).mean(0)  # fmt: skip
         totals["kl"] = totals["kl"] + kl_per_dim.clamp_min(free_bits).sum()
         delta = model.denormalise_delta(predicted)
         state, _ = make_state(body, *integrate(state.transl, state.orient, state.pose, delta), delta)
@@ -268,7 +270,9 @@ def train_wandr(config: WandrTrainConfig, train: WandrClips, validation: WandrCl
     seed_everything(config.seed)
     model = WandrPrior(config.model)
     if config.init is not None:
-        model.load_state_dict(load_wandr(config.init).state_dict())
+        missing, unexpected = model.load_state_dict(load_wandr(config.init).state_dict(), strict=False)
+        if unexpected or any(not name.startswith("prior_network.") for name in missing):  # only a new prior network may be missing
+            raise ValueError(f"{config.init} is not the same network as {config.model}: missing {missing}, unexpected {unexpected}")
     return train_delta_prior(model, WANDR_KIND, config, train, validation, lambda clips: WristGoals(clips, config),
                              config.weights or default_weights(config.model))  # fmt: skip
 

@@ -51,28 +51,32 @@ def far_windows(clips: WandrClips, horizon: int, min_travel: float, stride: int 
     return starts[travel > min_travel]
 
 
+def left_and_walked(pelvis: torch.Tensor, goal: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Pelvis ground tracks (W, F + 1, 2) from frame 0 -> at the end of every second (F // FPS, W): the distance
+    left to the goals' ground points (W, 2) and the path walked so far, metres."""
+    seconds = torch.arange(FPS, pelvis.shape[1], FPS)
+    walked = torch.cat([pelvis.new_zeros(len(pelvis), 1), (pelvis[:, 1:] - pelvis[:, :-1]).norm(dim=-1).cumsum(1)], 1)
+    return (pelvis[:, seconds] - goal[:, None]).norm(dim=-1).T, walked[:, seconds].T
+
+
 @torch.no_grad()
 def pace(stepper: WandrStepper, clips: WandrClips, starts: torch.Tensor, horizon: int, sigma: float,
          seed: int = 0) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:  # fmt: skip
     """Roll the prior out from the data at `starts` (W,) towards the wrist at `starts + horizon`, due then.
 
-    Returns, at the end of every second, the pelvis-to-goal ground distance and the ground path the pelvis
-    has walked (each (horizon // FPS, W)), and the final wrist-to-goal distance (W,), metres.
+    Returns `left_and_walked` of its pelvis (each (horizon // FPS, W)) and the final wrist-to-goal distance
+    (W,), metres.
     """
     goal_frames = starts + horizon
     goal = clips.joints[goal_frames, RIGHT_WRIST]
     generator = torch.Generator().manual_seed(seed)
-    state, left, walked = clips.state(starts), [], []
-    path = torch.zeros(len(starts))
+    state = clips.state(starts)
+    track = [state.joints[:, PELVIS, :2]]
     for frame in range(1, horizon + 1):
         z = sigma * torch.randn(len(starts), stepper.prior.config.latent, generator=generator)
-        before = state.joints[:, PELVIS, :2]
         state, _ = stepper.step(state, z, goal, goal_frames - (starts + frame - 1))
-        path = path + (state.joints[:, PELVIS, :2] - before).norm(dim=-1)
-        if frame % FPS == 0:
-            left.append((state.joints[:, PELVIS, :2] - goal[:, :2]).norm(dim=-1))
-            walked.append(path)
-    return torch.stack(left), torch.stack(walked), (state.joints[:, RIGHT_WRIST] - goal).norm(dim=-1)
+        track.append(state.joints[:, PELVIS, :2])
+    return *left_and_walked(torch.stack(track, 1), goal[:, :2]), (state.joints[:, RIGHT_WRIST] - goal).norm(dim=-1)
 
 
 def main(weights: list[Path], horizon_s: int = 6, min_travel: float = 2.0) -> int:
@@ -86,11 +90,9 @@ def main(weights: list[Path], horizon_s: int = 6, min_travel: float = 2.0) -> in
     starts = far_windows(clips, horizon, min_travel)
     if len(starts) == 0:
         raise ValueError(f"no training window travels more than {min_travel} m in {horizon_s} s")
-    goal = clips.joints[starts + horizon, RIGHT_WRIST, :2]
-    pelvis = clips.joints[starts[:, None] + torch.arange(horizon + 1), PELVIS, :2]  # (W, horizon + 1, 2)
-    seconds = torch.arange(1, horizon_s + 1) * FPS
-    data_path = torch.cat([torch.zeros(len(starts), 1), (pelvis[:, 1:] - pelvis[:, :-1]).norm(dim=-1).cumsum(1)], 1)
-    columns = {"data": ((pelvis[:, seconds] - goal[:, None]).norm(dim=-1).T.median(1).values, data_path[:, seconds].T.median(1).values)}
+    data = left_and_walked(clips.joints[starts[:, None] + torch.arange(horizon + 1), PELVIS, :2],
+                           clips.joints[starts + horizon, RIGHT_WRIST, :2])  # fmt: skip
+    columns = {"data": tuple(values.median(1).values for values in data)}
     reached = {}
     body = BodyModel()
     for path in weights:

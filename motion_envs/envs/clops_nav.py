@@ -98,7 +98,7 @@ from motion_envs.counter_random import counter_normal
 from motion_envs.envs.core import CoreVectorEnv, check_actions, config_from_kwargs
 from motion_envs.envs.starts import DeltaPriorBodies, StartBodies
 from motion_envs.metrics import lowest_foot, track_skating
-from motion_envs.priors.clops import ClopsPrior, ClopsStepper, action_targets, head_pose, head_yaw, yaw_change
+from motion_envs.priors.clops import ClopsPrior, ClopsStepper, HeadPose, action_targets, head_pose, head_yaw, yaw_change
 from motion_envs.priors.train_clops import load_clops
 from motion_envs.priors.wandr_features import FPS, PELVIS, WandrState
 from motion_envs.render.egocentric import EgocentricRenderer
@@ -390,9 +390,10 @@ class ClopsNavCore:
         pelvis = state.joints[:, PELVIS, :2]
         return ((pelvis < bounds[:, :2] - margin) | (pelvis > bounds[:, 2:] + margin)).any(-1)
 
-    def goal_in_head_frame(self, state: ClopsNavState) -> torch.Tensor:
-        """(N, 3) the goal relative to the head, in the head's yaw frame (x right, y forward, z up)."""
-        head = head_pose(state.body)
+    def goal_in_head_frame(self, state: ClopsNavState, head: HeadPose | None = None) -> torch.Tensor:
+        """(N, 3) the goal relative to the head (`head`: the bodies' head pose when already computed), in the head's
+        yaw frame (x right, y forward, z up)."""
+        head = head_pose(state.body) if head is None else head
         return ((state.goal - head.position)[:, None] @ about_z(head_yaw(head.rotation))).squeeze(1)  # R_zᵀ (g − h)
 
     def memory(self, state: ClopsNavState) -> torch.Tensor:
@@ -400,10 +401,11 @@ class ClopsNavCore:
         since last seen (fraction of the episode; 1 if never), LOOK_BINS directions looked at (relative to the head:
         bin j is j · 360° / LOOK_BINS counter-clockwise from ahead), elapsed fraction of the episode]."""
         seen = state.seen_at >= 0
-        goal = self.goal_in_head_frame(state)[:, :2] * seen[:, None]
+        head = head_pose(state.body)
+        goal = self.goal_in_head_frame(state, head)[:, :2] * seen[:, None]
         since = torch.where(seen, (state.frame - state.seen_at).float() / self.config.max_frames, 1.0)
         width = 2 * math.pi / LOOK_BINS
-        yaw = head_yaw(head_pose(state.body).rotation)
+        yaw = head_yaw(head.rotation)
         relative = torch.arange(LOOK_BINS, device=self.device) * width
         world_bin = torch.round((yaw[:, None] + relative) / width).long() % LOOK_BINS
         looked = state.looked.gather(1, world_bin).float()

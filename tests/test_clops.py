@@ -194,18 +194,38 @@ def test_mixed_family_draws_rooms_of_every_family():
         ClopsNavConfig(family="attic")
 
 
+def assert_views_agree(single: np.ndarray, batched: np.ndarray) -> None:
+    """A single env's (5, H, W) uint8 view against the same body's view in a batch.
+
+    Not bit-equal by construction: the prior's Linear layers run as one matmul over the batch, and oneDNN/MKL pick
+    other kernels (other summation orders) for 1 and N rows and for AVX2 and AVX-512/AMX, so the bodies agree to
+    about 3e-7 m after a 30-frame chunk (asserted by the caller within 1e-5 m). Depth is quantised to
+    `max_depth` / 255 = 3.9 cm a level, so such a difference moves a pixel by at most one level, and only a pixel
+    whose depth lies on a rounding boundary (measured on an AMX Xeon: 1 of 4,096 pixels, by 1 level); a silhouette
+    (semantic or goal pixel) changes only where a ray grazes an edge within that distance. Allowed: depth within one
+    level, at most 1% of the pixels different in any channel."""
+    difference = np.abs(single.astype(np.int16) - batched.astype(np.int16))
+    assert difference[0].max() <= 1, f"depth differs by {difference[0].max()} levels"
+    changed = (difference > 0).reshape(len(difference), -1).mean(-1)
+    assert changed.max() <= 0.01, f"share of pixels that differ per channel: {changed.tolist()}"
+
+
 def test_vector_env_equals_single_envs_and_renders():
     single = [gym.make(ENV_ID, scene_seeds=SEEDS) for _ in range(2)]
     vector = gym.make_vec(ENV_ID, num_envs=2, vectorization_mode="vector_entry_point", scene_seeds=SEEDS, render_mode="rgb_array")
     batch, _ = vector.reset(seed=5)
     for index, env in enumerate(single):
         observation, _ = env.reset(seed=5 + index)
-        assert np.array_equal(observation, batch[index])
+        assert_views_agree(observation, batch[index])
     actions = np.array([0, 7])
     batch, rewards, *_ = vector.step(actions)
     for index, env in enumerate(single):
         observation, reward, *_ = env.step(int(actions[index]))
-        assert np.array_equal(observation, batch[index]) and reward == pytest.approx(rewards[index], abs=1e-5)
+        alone, together = env.unwrapped.state, vector.unwrapped.state
+        assert int(alone.frame[0]) == int(together.frame[index])  # the same chunk length: the same reach decisions
+        assert torch.allclose(alone.joints[0], together.joints[index], atol=1e-5)
+        assert_views_agree(observation, batch[index])
+        assert reward == pytest.approx(rewards[index], abs=1e-5)
     frame = vector.render()
     assert frame.dtype == np.uint8 and frame.shape == (360, 480, 3)
 

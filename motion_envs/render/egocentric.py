@@ -54,7 +54,11 @@ class EgocentricRenderer:
 
     def _render_chunk(self, eye: np.ndarray, rotation: np.ndarray, goal: np.ndarray | None, goal_radius: float) -> np.ndarray:
         bodies, pixels = len(eye), len(self.local_directions)
-        directions = np.einsum("bij,pj->bpi", rotation, self.local_directions).reshape(-1, 3)  # (B·H·W, 3)
+        # R d as three explicit products and sums (no einsum/BLAS reduction): elementwise IEEE operations give every
+        # body the same bits in a batch of any size on any CPU, so batched views equal single ones by construction
+        local = self.local_directions
+        directions = (rotation[:, None, :, 0] * local[None, :, 0, None] + rotation[:, None, :, 1] * local[None, :, 1, None]
+                      + rotation[:, None, :, 2] * local[None, :, 2, None]).reshape(-1, 3)  # (B·H·W, 3)  # fmt: skip
         origins = np.repeat(eye, pixels, axis=0)
         triangle, distance = self.caster.cast(origins, directions, parallel=False)
         label = np.where(triangle >= 0, self.scene.face_labels[triangle.clip(min=0)], 0)

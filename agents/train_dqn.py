@@ -28,7 +28,7 @@ from stable_baselines3.common.vec_env import VecMonitor
 from agents.double_dqn import PrioritizedDoubleDQN
 from agents.train_ppo import CurveCallback, ship_policy
 from agents.vec_env import NativeVecEnv
-from motion_envs.priors.training import WEIGHTS_DIR
+from motion_envs.priors.training import weights_destination
 
 
 OBSERVATION_OPTIONS = {"": {}, "_known_goal": {"known_goal": True}, "_memory": {"goal_memory": True}}
@@ -64,6 +64,8 @@ class DQNTrainConfig:
     seed: int = 0
     run_dir: Path = Path("runs/dqn")
     weights: Path | None = None
+    ship: bool = False
+    """Write the policy into the package (priors/weights/ + manifest) instead of `run_dir` (`weights_destination`)."""
     command: str = ""
 
     def weights_path(self) -> Path:
@@ -71,7 +73,7 @@ class DQNTrainConfig:
         suffix = next((suffix for suffix, trained in OBSERVATION_OPTIONS.items() if trained == options), None)
         if suffix is None:
             raise ValueError(f"no policy name for the observation options {options}: choose at most one")
-        return self.weights or WEIGHTS_DIR / f"dqn_clopsnav_{self.family}{suffix}.zip"
+        return weights_destination(f"dqn_clopsnav_{self.family}{suffix}.zip", self.run_dir, self.weights, self.ship)
 
 
 def make_model(config: DQNTrainConfig, venv: VecMonitor) -> PrioritizedDoubleDQN:

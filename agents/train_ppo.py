@@ -35,7 +35,7 @@ from agents.ppo_kl import PAPER_SETTINGS, PPOKL  # noqa: E402
 from agents.vec_env import NativeVecEnv  # noqa: E402
 from motion_envs.atomic import atomic_write  # noqa: E402
 from motion_envs.data.goal_windows import GoalWindows  # noqa: E402
-from motion_envs.priors.training import WEIGHTS_DIR, record_in_manifest  # noqa: E402
+from motion_envs.priors.training import announce_replacement, record_in_manifest, weights_destination  # noqa: E402
 
 
 @dataclass
@@ -69,27 +69,29 @@ class PPOTrainConfig:
     """SB3's γ·V(s) at time-limit ends; off: the paper's Monte-Carlo returns (see `NativeVecEnv`)."""
     anchor: float = 0.0
     """β of KL(π ‖ the cloned policy) added to the loss (`PPOKL.anchor_coef`); 0: the paper's loss."""
-    ship: str = "best"
-    """"best": ship the checkpoint whose training-success window was best, a guard against late drift (before
+    keep: str = "best"
+    """"best": keep the checkpoint whose training-success window was best, a guard against late drift (before
     Monte-Carlo returns, runs went 0.23 -> 0.51 -> 0.09 over 230k steps); "last": the final one."""
     checkpoint_minutes: float = 3.0
     seed: int = 0
     run_dir: Path = Path("runs/ppo")
     weights: Path | None = None
+    ship: bool = False
+    """Write the policy into the package (priors/weights/ + manifest) instead of `run_dir` (`weights_destination`)."""
     command: str = ""
 
     def __post_init__(self) -> None:
         if self.init not in ("data", "scratch") and not Path(self.init).is_file():
             raise ValueError(f"init must be 'data', 'scratch' or a policy file, got {self.init!r} (no such file)")
-        if self.ship not in ("best", "last"):
-            raise ValueError(f"ship must be 'best' or 'last', got {self.ship!r}")
+        if self.keep not in ("best", "last"):
+            raise ValueError(f"keep must be 'best' or 'last', got {self.keep!r}")
         if self.anchor > 0 and self.init != "data":
             raise ValueError("anchor > 0 holds the policy near its cloned start: it needs init='data'")
 
     def weights_path(self) -> Path:
         name = self.env_id.split("/")[-1].split("-")[0].lower()
         reward = self.reward.replace(":", "-").replace("=", "").replace(",", "-")  # "paper:goal=5" -> "paper-goal5"
-        return self.weights or WEIGHTS_DIR / f"ppo_{name}_alpha{self.alpha:g}_{reward}.zip"
+        return weights_destination(f"ppo_{name}_alpha{self.alpha:g}_{reward}.zip", self.run_dir, self.weights, self.ship)
 
 
 class CurveCallback(BaseCallback):
@@ -178,7 +180,7 @@ def train_ppo(config: PPOTrainConfig, clone_from: GoalWindows | None = None) -> 
         model.learn(total_timesteps=remaining, callback=callback, reset_num_timesteps=False, progress_bar=True)
         callback.save()
     extra = {"cloning": json.loads(cloning_path.read_text())} if cloning_path.exists() else {}
-    return ship_policy(model, config, curve, "ppo_policy", best=config.ship == "best", **extra)
+    return ship_policy(model, config, curve, "ppo_policy", best=config.keep == "best", **extra)
 
 
 def ship_policy(model: Any, config: Any, curve: list[dict], kind: str, best: bool = True,
@@ -192,6 +194,7 @@ def ship_policy(model: Any, config: Any, curve: list[dict], kind: str, best: boo
     optimiser = chosen.policy.optimizer  # shipped without Adam's moments: half the size (runs/ keeps them to resume)
     parameters = [parameter for group in optimiser.param_groups for parameter in group["params"]]
     chosen.policy.optimizer = type(optimiser)(parameters, **optimiser.defaults)
+    announce_replacement(weights)
     atomic_write(weights, chosen.save)
     entry = {"kind": kind, "config": {k: str(v) if isinstance(v, Path) else v for k, v in asdict(config).items()},
              "timesteps": int(model.num_timesteps), "curve": curve, "torch": str(torch.__version__),

@@ -74,7 +74,7 @@ def train_goal_cvae(config: GoalCVAETrainConfig, train: GoalWindows, validation:
     model.eval()
     entry = config.entry(PREDICTOR_KIND, config.model, history, baseline="g-CVAE", training_windows=len(train),
                          validation_marker_error_cm=round(validation_error_cm(model, validation), 2))  # fmt: skip
-    return ship(model, config.weights or G_CVAE_WEIGHTS, entry)
+    return ship(model, config.output(G_CVAE_WEIGHTS.name), entry)
 
 
 def goal_cvae_generator(path: str | Path = G_CVAE_WEIGHTS, base: GammaGenerator | None = None) -> GammaGenerator:

@@ -145,7 +145,7 @@ def _train_ppo(args: argparse.Namespace) -> int:
     given = {"env_id": args.env, "reward": args.reward, "alpha": args.alpha, "num_envs": args.num_envs,
              "total_timesteps": args.timesteps, "run_dir": args.run_dir, "weights": args.weights, "seed": args.seed,
              "init": args.init, "log_std_init": args.log_std_init, "learning_rate": args.learning_rate,
-             "n_steps": args.n_steps, "anchor": args.anchor,
+             "n_steps": args.n_steps, "anchor": args.anchor, "ship": args.ship or None,
              "env_kwargs": dict(_env_option(option) for option in args.env_option) or None}  # fmt: skip
     config = PPOTrainConfig(command="motion-envs " + " ".join(sys.argv[1:]),
                             **{name: value for name, value in given.items() if value is not None})  # fmt: skip
@@ -171,7 +171,7 @@ def _train_dqn(args: argparse.Namespace) -> int:
 
     given = {"family": args.family, "known_goal": args.known_goal or None, "goal_memory": args.goal_memory or None,
              "num_envs": args.num_envs, "total_timesteps": args.timesteps, "run_dir": args.run_dir, "weights": args.weights, "seed": args.seed,
-             "learning_rate": args.learning_rate, "batch_size": args.batch_size,
+             "learning_rate": args.learning_rate, "batch_size": args.batch_size, "ship": args.ship or None,
              "env_kwargs": dict(_env_option(option) for option in args.env_option) or None}  # fmt: skip
     config = DQNTrainConfig(command="motion-envs " + " ".join(sys.argv[1:]),
                             **{name: value for name, value in given.items() if value is not None})  # fmt: skip
@@ -211,7 +211,7 @@ def _train(args: argparse.Namespace) -> int:
         return 2
     dataset = _gamma_dataset(args)
     given = {"epochs": args.epochs, "batch_size": args.batch_size, "run_dir": args.run_dir, "weights": args.weights,
-             "window_stride": args.window_stride, "rollout_epochs": args.rollout_epochs}  # fmt: skip
+             "window_stride": args.window_stride, "rollout_epochs": args.rollout_epochs, "ship": args.ship or None}  # fmt: skip
     common = {"data_hash": dataset.path.stem, "command": "motion-envs " + " ".join(sys.argv[1:]),
               **{name: value for name, value in given.items() if value is not None}}  # fmt: skip
     entry = stages[args.stage](args, dataset, common)
@@ -238,6 +238,7 @@ def _delta_prior_clips(args: argparse.Namespace):
 
 def _train_wandr(args: argparse.Namespace) -> int:
     from motion_envs.priors.train_wandr import WandrTrainConfig, default_weights, train_wandr
+    from motion_envs.priors.training import weights_destination
     from motion_envs.priors.wandr import WandrConfig
 
     subsets = tuple(dict.fromkeys(args.subset))  # `--subset hdm05` adds to the default cmu
@@ -245,10 +246,11 @@ def _train_wandr(args: argparse.Namespace) -> int:
     intentions = tuple(args.intentions.split(",")) if args.intentions else WandrConfig().intentions
     model = WandrConfig(intentions=intentions, learned_prior=args.learned_prior, **({"layers": args.layers} if args.layers else {}))
     name = default_weights(model, subsets)
+    run_dir = args.run_dir or Path("runs") / Path(name).stem
     given = {"epochs": args.epochs, "batch_size": args.batch_size, "window_stride": args.window_stride,
              "seed": args.seed, "max_rollout": args.max_rollout, "kl_weight": args.kl_weight,
-             "late_kl_weight": args.late_kl_weight, "kl_raise_epoch": args.kl_raise_epoch, "weights": args.weights or name,
-             "run_dir": args.run_dir or Path("runs") / name.stem, "init": _prior_init(args),
+             "late_kl_weight": args.late_kl_weight, "kl_raise_epoch": args.kl_raise_epoch,
+             "weights": weights_destination(name, run_dir, args.weights, args.ship), "run_dir": run_dir, "init": _prior_init(args),
              "far_goal_probability": args.far_goal_probability}  # fmt: skip
     config = WandrTrainConfig(model=model, data_hash=dataset.path.stem, command="motion-envs " + " ".join(sys.argv[1:]),
                               **{key: value for key, value in given.items() if value is not None})  # fmt: skip
@@ -272,7 +274,8 @@ def _train_clops(args: argparse.Namespace) -> int:
     dataset, train_clips, validation_clips = _delta_prior_clips(args)
     model = ClopsConfig(**{name: value for name, value in (("layers", args.layers), ("actions", args.actions)) if value})
     given = {"epochs": args.epochs, "batch_size": args.batch_size, "window_stride": args.window_stride, "seed": args.seed,
-             "max_rollout": args.max_rollout, "kl_weight": args.kl_weight, "weights": args.weights, "run_dir": args.run_dir}  # fmt: skip
+             "max_rollout": args.max_rollout, "kl_weight": args.kl_weight, "weights": args.weights, "run_dir": args.run_dir,
+             "ship": args.ship or None}  # fmt: skip
     if args.prior_init is not None:
         given["init"] = _prior_init(args)
     config = ClopsTrainConfig(model=model, data_hash=dataset.path.stem, command="motion-envs " + " ".join(sys.argv[1:]),
@@ -281,7 +284,7 @@ def _train_clops(args: argparse.Namespace) -> int:
     for key, value in entry.items():
         if key.startswith("validation"):
             print(f"{key}: {json.dumps(value)}")
-    print(f"weights {config.weights or 'motion_envs/priors/weights/clops.pt'}")
+    print(f"weights {config.output('clops.pt')}")
     return 0
 
 
@@ -381,7 +384,9 @@ def parser() -> argparse.ArgumentParser:
     train.add_argument("--batch-size", type=int, default=None, help="default: the stage's own")
     train.add_argument("--window-stride", type=int, default=None, help="frames between training windows")
     train.add_argument("--run-dir", type=Path, default=None, help="checkpoints and tensorboard logs")
-    train.add_argument("--weights", type=Path, default=None, help="output (default: priors/weights/)")
+    train.add_argument("--weights", type=Path, default=None, help="output file (default: the run folder, or priors/weights/ with --ship)")
+    train.add_argument("--ship", action="store_true",
+                       help="write the weights into the package (motion_envs/priors/weights/ + manifest.json), replacing the shipped ones")
     train.add_argument("--env", default=None, help="ppo: environment id (default motion_envs/GammaReach-v0)")
     train.add_argument("--reward", default=None, help="ppo: reward config, paper | release")
     train.add_argument("--alpha", type=float, default=None, help="ppo: weight of the KL-to-prior regulariser (paper: 1, 10)")

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import pytest
 import torch
 
@@ -155,3 +157,29 @@ def test_regressor_and_pose_vae_training_runs_write_loadable_weights(walking_cli
     assert load_pose_vae(vae.weights).encode(poses[:3])[0].shape == (3, 4)
     manifest = (tmp_path / "w" / "manifest.json").read_text()
     assert '"r.pt"' in manifest and '"v.pt"' in manifest
+
+
+def test_training_writes_to_its_run_folder_unless_shipped(walking_clips, tmp_path, monkeypatch, capsys):
+    """A run without `weights` once replaced the shipped pose VAE; now only `ship=True` writes into the package
+    (here a copy of the weights folder: WEIGHTS_DIR points at it) and says what it replaces."""
+    import shutil
+
+    from motion_envs.priors import training
+    from motion_envs.priors.gamma import PoseVAEConfig
+    from motion_envs.priors.train_pose_prior import PoseVAETrainConfig, train_pose_vae
+
+    shipped = training.WEIGHTS_DIR / "gamma_pose_vae.pt"
+    before = shipped.read_bytes()
+    poses = walking_clips.body_pose
+    config = PoseVAETrainConfig(model=PoseVAEConfig(hidden=16, latent=4), epochs=1, batch_size=64, run_dir=tmp_path / "run")
+    train_pose_vae(config, poses, poses)
+    assert (tmp_path / "run" / "gamma_pose_vae.pt").is_file() and shipped.read_bytes() == before
+    package = tmp_path / "package_weights"
+    package.mkdir()
+    for name in ("gamma_pose_vae.pt", "manifest.json"):
+        shutil.copy(training.WEIGHTS_DIR / name, package / name)
+    monkeypatch.setattr(training, "WEIGHTS_DIR", package)
+    capsys.readouterr()
+    train_pose_vae(dataclasses.replace(config, ship=True, run_dir=tmp_path / "run2"), poses, poses)
+    assert (package / "gamma_pose_vae.pt").read_bytes() != before and shipped.read_bytes() == before
+    assert "replacing the shipped" in capsys.readouterr().err

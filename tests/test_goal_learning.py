@@ -103,5 +103,5 @@ def test_train_ppo_clones_the_data_then_resumes_and_ships(windows, tmp_path):
     assert PPOKL.load(tuned.weights, device="cpu").learning_rate == 1e-5
     with pytest.raises(ValueError, match="policy file"):
         PPOTrainConfig(init="runs/no_such_policy.zip")
-    with pytest.raises(ValueError, match="ship"):
-        PPOTrainConfig(ship="first")
+    with pytest.raises(ValueError, match="keep"):
+        PPOTrainConfig(keep="first")

@@ -114,7 +114,7 @@ def train_clops(config: ClopsTrainConfig, train: WandrClips, validation: WandrCl
         start.pop("actions", None)  # the action set is refitted below
         model.load_state_dict({**model.state_dict(), **start})
     model.set_actions(fit_head_actions(train, config.model.horizon, config.model.actions, config.seed))
-    weights = config.weights or WEIGHTS_DIR / "clops.pt"
+    weights = config.output("clops.pt")
     return train_delta_prior(model, CLOPS_KIND, config, train, validation, lambda clips: HeadTargets(clips, config.model.horizon),
                              weights)  # fmt: skip
 

@@ -17,7 +17,7 @@ import torch
 from motion_envs.data.primitives import PRIMITIVE_FRAMES, MarkerClips, MarkerWindows
 from motion_envs.priors.canonical import canonical_frame, to_canonical, to_world
 from motion_envs.priors.gamma import MarkerCVAE, MarkerCVAEConfig, predictor_loss
-from motion_envs.priors.training import WEIGHTS_DIR, TrainRun, fit, load_shipped, minibatches, seed_everything, ship
+from motion_envs.priors.training import TrainRun, fit, load_shipped, minibatches, seed_everything, ship
 
 PREDICTOR_KIND = "gamma_predictor"
 
@@ -115,7 +115,7 @@ def train_predictor(config: PredictorTrainConfig, train: MarkerClips, validation
     history = fit(model, optimiser, settings, epoch_batches, loss_terms, lambda e: "rollout" if rollout(e) else "")
     entry = config.entry(PREDICTOR_KIND, config.model, history, rollout_epochs=config.rollout_epochs,
                          validation_marker_error_cm_per_frame=validate(model, validation, config.rollout_primitives))  # fmt: skip
-    return ship(model, config.weights or WEIGHTS_DIR / f"gamma_predictor_{config.model.seed_frames}f.pt", entry)
+    return ship(model, config.output(f"gamma_predictor_{config.model.seed_frames}f.pt"), entry)
 
 
 def load_predictor(path: str | Path) -> MarkerCVAE:

@@ -59,7 +59,7 @@ def train_pose_vae(config: PoseVAETrainConfig, train_poses: torch.Tensor, valida
     figures = validate_pose_vae(model, validation_poses)
     print(f"validation: {figures}", file=sys.stderr)
     entry = config.entry(POSE_VAE_KIND, config.model, history, kl_weight=config.kl_weight, validation=figures)
-    return ship(model, config.weights or WEIGHTS_DIR / "gamma_pose_vae.pt", entry)
+    return ship(model, config.output("gamma_pose_vae.pt"), entry)
 
 
 def load_pose_vae(path: str | Path = WEIGHTS_DIR / "gamma_pose_vae.pt") -> PoseVAE:

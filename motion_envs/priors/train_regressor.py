@@ -89,7 +89,7 @@ def train_regressor(config: RegressorTrainConfig, train: MarkerClips, validation
     figures = validate_regressor(model, body, validation)
     print(f"validation: {figures}", file=sys.stderr)
     entry = config.entry(REGRESSOR_KIND, config.model, history, validation=figures)
-    return ship(model, config.weights or WEIGHTS_DIR / "gamma_regressor.pt", entry)
+    return ship(model, config.output("gamma_regressor.pt"), entry)
 
 
 def load_regressor(path: str | Path = WEIGHTS_DIR / "gamma_regressor.pt") -> BodyRegressor:

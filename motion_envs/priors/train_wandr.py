@@ -258,11 +258,11 @@ def validate(model: WandrPrior, clips: WandrClips, targets: HindsightTargets, co
     return figures
 
 
-def default_weights(config: WandrConfig, subsets: tuple[str, ...] = ("cmu",)) -> Path:
-    """priors/weights/wandr.pt for the full model on CMU; ablations and data variants get suffixes."""
+def default_weights(config: WandrConfig, subsets: tuple[str, ...] = ("cmu",)) -> str:
+    """The weights' file name: wandr.pt for the full model on CMU; ablations and data variants get suffixes."""
     suffix = "" if tuple(config.intentions) == INTENTIONS else "_" + "_".join(config.intentions)
     data = "" if tuple(subsets) == ("cmu",) else "_" + "_".join(subsets)
-    return WEIGHTS_DIR / f"wandr{suffix}{data}.pt"
+    return f"wandr{suffix}{data}.pt"
 
 
 def train_wandr(config: WandrTrainConfig, train: WandrClips, validation: WandrClips) -> dict:
@@ -274,7 +274,7 @@ def train_wandr(config: WandrTrainConfig, train: WandrClips, validation: WandrCl
         if unexpected or any(not name.startswith("prior_network.") for name in missing):  # only a new prior network may be missing
             raise ValueError(f"{config.init} is not the same network as {config.model}: missing {missing}, unexpected {unexpected}")
     return train_delta_prior(model, WANDR_KIND, config, train, validation, lambda clips: WristGoals(clips, config),
-                             config.weights or default_weights(config.model))  # fmt: skip
+                             config.output(default_weights(config.model)))  # fmt: skip
 
 
 def train_delta_prior(model: WandrPrior, kind: str, config: WandrTrainConfig, train: WandrClips, validation: WandrClips,

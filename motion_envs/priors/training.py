@@ -3,8 +3,11 @@
 `fit` runs epochs of minibatches with a progress bar and tensorboard, saves
 a run checkpoint (model, optimiser, epoch, history) every few minutes and
 after every epoch, and resumes from it when rerun. `ship` writes float16
-weights plus an entry in `priors/weights/manifest.json`; `load_shipped`
-reads them back as float32 modules.
+weights plus an entry in the `manifest.json` beside them; `load_shipped`
+reads them back as float32 modules. A run writes its weights into its own run
+folder (`weights_destination`); only an explicit `ship=True` (`motion-envs
+train ... --ship`) writes into the package's `priors/weights/`, and says what it
+replaces.
 """
 
 from __future__ import annotations
@@ -54,9 +57,15 @@ class TrainRun:
     seed: int = 0
     run_dir: Path = Path("runs/prior")
     weights: Path | None = None
-    """Output file (default: the prior's name under priors/weights/)."""
+    """Output file (default: `weights_destination`: the prior's name in `run_dir`, or in priors/weights/ with `ship`)."""
+    ship: bool = False
+    """Write the weights into the package (priors/weights/ + its manifest), replacing the shipped ones."""
     data_hash: str = ""
     command: str = ""
+
+    def output(self, name: str) -> Path:
+        """Where this run writes weights called `name` (`weights_destination`)."""
+        return weights_destination(name, self.run_dir, self.weights, self.ship)
 
     def fit_settings(self, kind: str, epochs: int | None = None) -> FitSettings:
         return FitSettings(kind, self.run_dir, self.epochs if epochs is None else epochs, self.seed, self.checkpoint_minutes)
@@ -65,6 +74,26 @@ class TrainRun:
         """The manifest entry of a finished run: what, from which data and command, and how well."""
         return {"kind": kind, "config": asdict(model_config), "data_hash": self.data_hash, "command": self.command,
                 "epochs": self.epochs, "train_loss_by_epoch": [round(v, 5) for v in history], **figures}  # fmt: skip
+
+
+def weights_destination(name: str, run_dir: Path, weights: Path | None = None, ship: bool = False) -> Path:
+    """Where a training run writes its weights: `weights` when given; else priors/weights/`name` when `ship` (the
+    explicit act that replaces the package's weights); else `run_dir`/`name`, beside the run's checkpoints."""
+    if weights is not None:
+        return Path(weights)
+    return (WEIGHTS_DIR if ship else Path(run_dir)) / name
+
+
+def announce_replacement(weights: Path) -> None:
+    """Say on stderr which shipped weights (and the manifest's record of them) a write to `weights` replaces."""
+    weights = Path(weights)
+    if not weights.exists() or weights.resolve().parent != WEIGHTS_DIR.resolve():
+        return
+    manifest_path = WEIGHTS_DIR / "manifest.json"
+    record = json.loads(manifest_path.read_text()).get(weights.name, {}) if manifest_path.exists() else {}
+    figures = {key: value for key, value in record.items() if key.startswith("validation") and not isinstance(value, (list, dict))}
+    print(f"replacing the shipped {weights} (made by: {record.get('command') or 'unknown'}; {figures or 'no figures'})",
+          file=sys.stderr)  # fmt: skip
 
 
 def seed_everything(seed: int) -> None:
@@ -139,8 +168,10 @@ def ship(model: nn.Module, weights: Path, entry: dict[str, Any]) -> dict[str, An
     """Write float16 weights with `entry` (kind, config, figures) and record `entry` in the manifest."""
     half = {name: value.half() if value.is_floating_point() else value for name, value in model.state_dict().items()}
     entry = {**entry, "torch": str(torch.__version__)}
+    announce_replacement(weights)
     save_checkpoint(weights, {**entry, "model": half})
     record_in_manifest(weights, entry)
+    print(f"weights {weights} (manifest: {Path(weights).parent / 'manifest.json'})", file=sys.stderr)
     return entry
 
 

@@ -12,15 +12,20 @@ from pathlib import Path
 
 import torch
 
+from agents.policy_files import POLICY_KINDS, PolicyFileError, read_policy_file
 from agents.ppo_kl import PPOKL
 from motion_envs.batched import BatchedState
 from motion_envs.envs.core import BatchedCore
 
 
 class PolicyLatent:
-    """A saved PPOKL policy. Sampled latents by default, as the paper (its release does not use the mean)."""
+    """A saved PPOKL policy. Sampled latents by default, as the paper (its release does not use the mean).
+    `file` says what it was trained for (`agents.policy_files`); a file of another kind fails here, by name."""
 
     def __init__(self, path: str | Path, deterministic: bool = False, seed: int = 0) -> None:
+        self.file = read_policy_file(path)
+        if self.file.kind != "ppo_policy":
+            raise PolicyFileError(f"{path} holds {POLICY_KINDS[self.file.kind]}, not {POLICY_KINDS['ppo_policy']}")
         self.model = PPOKL.load(path, device="cpu")
         self.deterministic = deterministic
         self.generator = torch.Generator().manual_seed(seed)
@@ -28,6 +33,10 @@ class PolicyLatent:
     @torch.no_grad()
     def __call__(self, core: BatchedCore, state: BatchedState) -> torch.Tensor:
         observations = core.observe(state).to(self.model.device)
+        expected = self.model.observation_space.shape
+        if tuple(observations.shape[1:]) != tuple(expected):
+            raise PolicyFileError(f"{self.file.path} expects observations of shape {expected}, the env gives "
+                                  f"{tuple(observations.shape[1:])}")  # fmt: skip
         distribution = self.model.policy.get_distribution(observations).distribution
         if self.deterministic:
             return distribution.loc.cpu()

@@ -31,6 +31,7 @@ from stable_baselines3.common.callbacks import BaseCallback  # noqa: E402
 from stable_baselines3.common.vec_env import VecMonitor, VecNormalize  # noqa: E402
 
 from agents.behaviour_cloning import clone_latents, posterior_latents  # noqa: E402
+from agents.policy_files import TrainedFor  # noqa: E402
 from agents.ppo_kl import PAPER_SETTINGS, PPOKL  # noqa: E402
 from agents.vec_env import NativeVecEnv  # noqa: E402
 from motion_envs.atomic import atomic_write  # noqa: E402
@@ -194,6 +195,7 @@ def ship_policy(model: Any, config: Any, curve: list[dict], kind: str, best: boo
     optimiser = chosen.policy.optimizer  # shipped without Adam's moments: half the size (runs/ keeps them to resume)
     parameters = [parameter for group in optimiser.param_groups for parameter in group["params"]]
     chosen.policy.optimizer = type(optimiser)(parameters, **optimiser.defaults)
+    chosen.trained_for = asdict(TrainedFor.of_config(config))  # saved with the model's data (`agents.policy_files`)
     announce_replacement(weights)
     atomic_write(weights, chosen.save)
     entry = {"kind": kind, "config": {k: str(v) if isinstance(v, Path) else v for k, v in asdict(config).items()},

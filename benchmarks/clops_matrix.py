@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from agents.policy_files import OBSERVATION_FLAGS, read_policy_file
 from agents.train_dqn import OBSERVATION_OPTIONS
 from benchmarks.machine import machine_line
 from benchmarks.sections import replace_section
@@ -132,7 +133,7 @@ def main(episodes_per_family: int = 100, families: tuple[str, ...] = tuple(FAMIL
     started = time.perf_counter()
     for family in families:
         for suffix, (label_suffix, options) in OBSERVATIONS.items():
-            observed = {name: path for name, path in policies.items() if observation_of(name) == suffix}
+            observed = {name: path for name, path in policies.items() if observation_of(path) == suffix}
             if suffix and not observed:
                 continue
             core = ClopsNavCore(ClopsNavConfig(family=family, split="test", **options))
@@ -154,9 +155,12 @@ def main(episodes_per_family: int = 100, families: tuple[str, ...] = tuple(FAMIL
     return 0
 
 
-def observation_of(policy_name: str) -> str:
-    """The `OBSERVATIONS` suffix of a policy name ("open_known_goal" -> "_known_goal", "open" -> "")."""
-    return next((suffix for suffix in OBSERVATIONS if suffix and policy_name.endswith(suffix)), "")
+def observation_of(path: Path) -> str:
+    """The `OBSERVATIONS` suffix of the observation options the policy at `path` was trained with (what the file
+    says, `agents.policy_files`): "_known_goal", "_memory" or ""."""
+    trained = read_policy_file(path).trained_for
+    flags = {} if trained is None else {flag: True for flag in OBSERVATION_FLAGS if trained.env_kwargs.get(flag)}
+    return next(suffix for suffix, options in OBSERVATION_OPTIONS.items() if options == flags)
 
 
 def trained_on(label: str) -> str | None:

@@ -95,8 +95,9 @@ def _bench_gamma_realism(args: argparse.Namespace) -> int:
 def _play(args: argparse.Namespace) -> int:
     from motion_envs.play import play
 
+    env_kwargs = dict(_env_option(option) for option in args.env_option)
     for summary in play(args.env_id, args.policy, args.baseline, args.video, args.seed, args.episodes, args.every, args.search,
-                        args.save_rollout):  # fmt: skip
+                        args.save_rollout, **env_kwargs):  # fmt: skip
         print(" ".join(f"{name}={value}" for name, value in summary.items()))
     if args.video:
         print(f"video: {args.video}")
@@ -113,11 +114,12 @@ def _view(args: argparse.Namespace) -> int:
     if (args.rollout is None) == (args.env is None):
         print("motion-envs view: give a rollout file or --env (live), not both", file=sys.stderr)
         return 2
-    live = LiveEpisodes(args.env, args.policy, args.baseline, args.seed) if args.env else None
+    env_kwargs = dict(_env_option(option) for option in args.env_option)
+    live = LiveEpisodes(args.env, args.policy, args.baseline, args.seed, env_kwargs) if args.env else None
     rollout = Rollout.load(args.rollout) if args.rollout else live.more()
     scene = _scene_argument(args.scene or rollout.scene or None, args.scene_file)  # a ClopsNav rollout names its room
     viewer = RolloutViewer(rollout, scene, host=args.host, port=args.port, extend=None if live is None else live.more)
-    print(f"viewer on http://{args.host}:{args.port} (Ctrl-C to stop)")
+    print(f"viewer on {viewer.url} (Ctrl-C to stop)", flush=True)
     try:
         viewer.run(args.duration)
     except KeyboardInterrupt:
@@ -360,7 +362,8 @@ def _add_data_args(parser: argparse.ArgumentParser, default_subsets: list[str] |
 
 
 def parser() -> argparse.ArgumentParser:
-    root = argparse.ArgumentParser(prog="motion-envs", description="Motion-prior Gymnasium environments.")
+    root = argparse.ArgumentParser(prog="motion-envs", description="Motion-prior Gymnasium environments.",
+                                   epilog="--debug (anywhere): show the traceback of an error instead of one line")  # fmt: skip
     commands = root.add_subparsers(dest="command", required=True, metavar="{data,train,bench,play,view}")
 
     data = commands.add_parser("data", help="build the motion cache from a mocap folder").add_subparsers(
@@ -477,12 +480,17 @@ def parser() -> argparse.ArgumentParser:
     play.add_argument("--every", type=int, default=2, help="keep every n-th frame in the video (40 fps / n)")
     play.add_argument("--search", type=int, default=None, metavar="K", help="play a tree search's branch (K kept per level)")
     play.add_argument("--save-rollout", type=Path, default=None, help="write every frame to an .npz for `motion-envs view`")
+    play.add_argument("--env-option", action="append", default=[], metavar="KEY=VALUE",
+                      help="a gym.make argument of the env, over what the policy was trained for (repeatable)")
     play.set_defaults(run=_play)
 
     view = commands.add_parser("view", help="browser viewer (viser): replay a rollout file or run a policy live")
     view.add_argument("rollout", nargs="?", type=Path, default=None, help="an .npz from `motion-envs play --save-rollout`")
-    view.add_argument("--env", default=None, help="run this env live instead (GammaReach-v0 or WandrReach-v0 id)")
-    view.add_argument("--policy", type=Path, default=None, help="live: a saved PPOKL policy (.zip)")
+    view.add_argument("--env", default=None,
+                      help="run this env live instead: motion_envs/GammaReach-v0, motion_envs/WandrReach-v0 or motion_envs/ClopsNav-v0")
+    view.add_argument("--policy", type=Path, default=None, help="live: a saved policy (.zip: PPOKL, or DQN for ClopsNav)")
+    view.add_argument("--env-option", action="append", default=[], metavar="KEY=VALUE",
+                      help="live: a gym.make argument of the env, over what the policy was trained for (repeatable)")
     view.add_argument("--baseline", default=None, help="live: a baseline name (as `play`)")
     view.add_argument("--seed", type=int, default=0)
     view.add_argument("--scene", default=None, metavar="FAMILY:SEED", help="show a procedural room, e.g. living:3 (default: the rollout's own, if it names one)")
@@ -495,8 +503,21 @@ def parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = parser().parse_args(argv)
-    return int(args.run(args) or 0)
+    """Run a command. An error prints one line naming it (exit 1); `--debug`, anywhere in the line, shows the
+    traceback instead."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    debug = "--debug" in argv
+    args = parser().parse_args([word for word in argv if word != "--debug"])
+    try:
+        return int(args.run(args) or 0)
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+    except Exception as error:  # the one place every command's failure becomes a sentence
+        if debug:
+            raise
+        print(f"motion-envs {args.command}: error: {error} ({type(error).__name__}; --debug shows the traceback)", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

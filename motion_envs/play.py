@@ -37,6 +37,26 @@ from motion_envs.rollout import Rollout, RolloutRecorder
 
 BASELINES = ("random", "greedy-reward", "greedy-distance")
 GAMMA_ID, WANDR_ID, CLOPS_ID = "motion_envs/GammaReach-v0", "motion_envs/WandrReach-v0", "motion_envs/ClopsNav-v0"
+POLICY_KIND = {GAMMA_ID: "ppo_policy", WANDR_ID: "ppo_policy", CLOPS_ID: "dqn_policy"}
+
+
+def policy_env_kwargs(env_id: str, policy: Path | None, env_kwargs: dict | None = None):
+    """(the policy file checked for `env_id`, or None; the env arguments to play it with: what it was trained for,
+    overridden by `env_kwargs`)."""
+    from agents.policy_files import env_kwargs_for, expect_policy
+
+    if env_id not in POLICY_KIND:
+        raise ValueError(f"play supports {GAMMA_ID}, {WANDR_ID} and {CLOPS_ID}, got {env_id!r}")
+    file = None if policy is None else expect_policy(policy, env_id, POLICY_KIND[env_id])
+    return file, env_kwargs_for(file, env_kwargs)
+
+
+def check_policy(file, env) -> None:
+    """The policy's spaces against the env's (before the first step); nothing without a policy."""
+    from agents.policy_files import check_policy_spaces
+
+    if file is not None:
+        check_policy_spaces(file, env.observation_space, env.action_space)
 
 
 def controller_for(policy: Path | None, baseline: str | None, seed: int) -> Callable:
@@ -63,6 +83,7 @@ def play(env_id: str, policy: Path | None = None, baseline: str | None = None, v
     controller's own latents."""
     if every < 1:
         raise ValueError(f"every must be >= 1, got {every}")
+    file, env_kwargs = policy_env_kwargs(env_id, policy, env_kwargs)
     if env_id == WANDR_ID:
         if search is not None:
             raise ValueError(f"--search needs a primitive-level env (GammaReach-v0), not {WANDR_ID}")
@@ -81,8 +102,7 @@ def play(env_id: str, policy: Path | None = None, baseline: str | None = None, v
         env = ClopsNavEnv(render_mode="rgb_array" if video is not None else None, **env_kwargs)
         controller = clops_controller(policy, baseline, seed)
         fps, run = env.metadata["render_fps"] * 30, _clops_episode
-    else:
-        raise ValueError(f"play supports {GAMMA_ID}, {WANDR_ID} and {CLOPS_ID}, got {env_id!r}")
+    check_policy(file, env)
     recorder = RolloutRecorder(fps, *env.core.goal_marker, env_id=env_id) if save_rollout else None
     writer = imageio.get_writer(str(video), fps=fps / every, macro_block_size=8) if video else None
     summaries = []
@@ -102,21 +122,22 @@ class LiveEpisodes:
     one second of motion), starting a new episode (next seed) when one ends. ClopsNav episodes all play in
     one held-out room (test seed 1000 + `seed`), the one the viewer shows."""
 
-    def __init__(self, env_id: str, policy: Path | None = None, baseline: str | None = None, seed: int = 0) -> None:
-        if env_id not in (GAMMA_ID, WANDR_ID, CLOPS_ID):
-            raise ValueError(f"the live viewer supports {GAMMA_ID}, {WANDR_ID} and {CLOPS_ID}, got {env_id!r}")
+    def __init__(self, env_id: str, policy: Path | None = None, baseline: str | None = None, seed: int = 0,
+                 env_kwargs: dict | None = None) -> None:  # fmt: skip
+        file, env_kwargs = policy_env_kwargs(env_id, policy, env_kwargs)
         self.env_id, self.seed = env_id, seed
         if env_id == CLOPS_ID:
             from motion_envs.envs.clops_nav import ClopsNavEnv
             from motion_envs.scenes.layouts import TEST_SEEDS
 
-            self.env = ClopsNavEnv(split="test", scene_seeds=(TEST_SEEDS[0] + seed,))
+            self.env = ClopsNavEnv(**{"split": "test", "scene_seeds": (TEST_SEEDS[0] + seed,), **env_kwargs})
             self.env.keep_frames = True
             self.controller = clops_controller(policy, baseline, seed)
         elif env_id == WANDR_ID:
-            self.env, self.controller = _wandr_env(False, {}), wandr_controller(policy, baseline, seed)
+            self.env, self.controller = _wandr_env(False, env_kwargs), wandr_controller(policy, baseline, seed)
         else:
-            self.env, self.controller = GammaReachEnv(), controller_for(policy, baseline, seed)
+            self.env, self.controller = GammaReachEnv(**env_kwargs), controller_for(policy, baseline, seed)
+        check_policy(file, self.env)
         self.fps = GAMMA_FPS if env_id == GAMMA_ID else 30
         self.observation, _ = self.env.reset(seed=seed)
         self.done = False

@@ -114,6 +114,11 @@ class RolloutViewer:
                                fps=r.fps, goal_shape=r.goal_shape, goal_radius=r.goal_radius, env_id=r.env_id, scene=r.scene)  # fmt: skip
         self.slider.max = self.rollout.frames - 1
 
+    @property
+    def url(self) -> str:
+        """The address the server actually listens on (viser moves to the next free port when the asked one is taken)."""
+        return f"http://{self.server.get_host()}:{self.server.get_port()}"
+
     def stop(self) -> None:
         self._stop.set()
         self.server.stop()

@@ -95,6 +95,10 @@ def test_train_ppo_clones_the_data_then_resumes_and_ships(windows, tmp_path):
     manifest = json.loads((tmp_path / "w" / "manifest.json").read_text())
     assert manifest["policy.zip"]["kind"] == "ppo_policy" and "cloning" in manifest["policy.zip"]
     assert PPOKL.load(config.weights, device="cpu").kl_prior_coef == config.alpha
+    from agents.policy_files import read_policy_file
+
+    (tmp_path / "w" / "manifest.json").unlink()  # what it was trained for travels in the file itself
+    assert read_policy_file(config.weights).trained_for.describe() == "motion_envs/GammaReach-v0 (reward='paper')"
     tuned = PPOTrainConfig(num_envs=4, n_steps=4, batch_size=16, n_epochs=1, total_timesteps=16, init=str(config.weights),
                            learning_rate=1e-5, run_dir=tmp_path / "tune", weights=tmp_path / "w" / "tuned.zip")  # fmt: skip
     assert train_ppo(tuned)["timesteps"] == 16  # a fine-tune counts its own steps from the loaded policy

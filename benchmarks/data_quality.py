@@ -35,6 +35,7 @@ from motion_envs.data.retarget import RetargetConfig, retarget  # noqa: E402
 from motion_envs.data.skeleton_maps import match_skeleton  # noqa: E402
 from motion_envs.data.splits import SPLITS  # noqa: E402
 from motion_envs.metrics import foot_skating  # noqa: E402
+from motion_envs.plots import save  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 FK_BATCH = 4096
@@ -132,9 +133,7 @@ def retarget_figure(mocap_dir: Path, destination: Path) -> None:
         axis.set_aspect("equal")
         axis.set_xticks([])
     figure.suptitle(f"{PLOT_CLIP}: source skeleton (grey, left) vs retargeted body (blue, right), side view")
-    figure.tight_layout()
-    figure.savefig(destination, dpi=90)
-    plt.close(figure)
+    save(figure, destination, dpi=90)
 
 
 def main(mocap_dir: Path | None = None, cache_dir: Path | None = None, subsets: tuple[str, ...] = ("cmu",)) -> int:

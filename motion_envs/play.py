@@ -19,6 +19,7 @@ with the egocentric view after each action inset.
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Callable
 from pathlib import Path
 
@@ -26,6 +27,7 @@ import imageio.v2 as imageio
 import numpy as np
 import torch
 
+from motion_envs.atomic import atomic_path
 from motion_envs.body.markers import foot_vertex_ids
 from motion_envs.data.primitives import GAMMA_FPS
 from motion_envs.envs.gamma_reach import GammaReachEnv
@@ -104,14 +106,14 @@ def play(env_id: str, policy: Path | None = None, baseline: str | None = None, v
         fps, run = env.metadata["render_fps"] * 30, _clops_episode
     check_policy(file, env)
     recorder = RolloutRecorder(fps, *env.core.goal_marker, env_id=env_id) if save_rollout else None
-    writer = imageio.get_writer(str(video), fps=fps / every, macro_block_size=8) if video else None
     summaries = []
-    try:
+    with contextlib.ExitStack() as stack:  # the video appears whole at `video` once every episode ran, or not at all
+        writer = None
+        if video:
+            partial = stack.enter_context(atomic_path(video))
+            writer = stack.enter_context(contextlib.closing(imageio.get_writer(str(partial), fps=fps / every, macro_block_size=8)))
         for episode in range(episodes):
             summaries.append(run(env, controller, writer, seed + episode, every, search, recorder))
-    finally:
-        if writer is not None:
-            writer.close()
     if recorder is not None:
         recorder.rollout().save(save_rollout)
     return summaries

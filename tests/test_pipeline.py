@@ -127,3 +127,31 @@ def test_shipped_start_poses_are_small_canonical_and_both_kinds(body):
         np.testing.assert_allclose(first[:, 0, :2].numpy(), 0.0, atol=1e-4)
     with pytest.raises(ValueError, match="no shipped start poses at 25 fps"):
         load_start_poses(25)
+
+
+def test_build_reports_every_bad_file_builds_the_rest_and_keeps_implausible_values_out(tmp_path, mocap_dir, capsys):
+    """A garbage npz (BadZipFile) or a zero frame rate (ZeroDivisionError) aborted the whole build, and a BVH with
+    1e300 values left inf in the cache; with every clip failing, only the first failure was named."""
+    mocap = tmp_path / "mocap" / "subject1"
+    _write_amass_folder(mocap)
+    (mocap / "garbage.npz").write_bytes(b"PK\x03\x04 not really a zip")
+    good = np.load(mocap / "walk_poses.npz")
+    np.savez(mocap / "zero_rate.npz", **{**good, "mocap_framerate": 0.0})
+    np.savez(mocap / "huge.npz", **{**good, "trans": np.full_like(good["trans"], 1e300)})
+    lines = (mocap_dir / "cmu" / "09_03.bvh").read_text().splitlines()
+    motion_at = lines.index("MOTION") + 13  # the tenth frame's values (CMU's first frame, a T-pose, is dropped)
+    lines[motion_at] = " ".join(["1e300"] * len(lines[motion_at].split()))
+    (mocap / "09_03.bvh").write_text("\n".join(lines[: motion_at + 50]).replace(lines[lines.index("MOTION") + 1], "Frames: 60"))
+    report = build(mocap_dir=tmp_path / "mocap", cache_dir=tmp_path / "cache", fps_list=(30,), progress=False)
+    assert report.clips == 1
+    reasons = dict(failure.split(": ", 1) for failure in report.failures)
+    assert set(reasons) == {"subject1/garbage.npz", "subject1/zero_rate.npz", "subject1/huge.npz", "subject1/09_03.bvh"}
+    assert "not a readable npz" in reasons["subject1/garbage.npz"] and "positive" in reasons["subject1/zero_rate.npz"]
+    assert "non-finite" in reasons["subject1/huge.npz"] or "implausible" in reasons["subject1/huge.npz"]
+    assert "non-finite" in reasons["subject1/09_03.bvh"] or "implausible" in reasons["subject1/09_03.bvh"]
+    dataset = MotionDataset.load(report.caches[30])
+    assert all(np.isfinite(dataset.arrays[name]).all() for name in ("transl", "global_orient", "body_pose"))
+    (mocap / "walk_poses.npz").unlink()
+    with pytest.raises(RuntimeError, match=r"failed \(4\)") as error:
+        build(mocap_dir=tmp_path / "mocap", cache_dir=tmp_path / "cache", fps_list=(30,), progress=False)
+    assert all(name in str(error.value) for name in ("garbage.npz", "zero_rate.npz", "huge.npz", "09_03.bvh"))

@@ -66,3 +66,41 @@ def test_cli_errors_are_one_line_with_a_nonzero_exit_and_debug_shows_the_traceba
     assert line.startswith("motion-envs play: error:") and "needs a ClopsNav DQN policy" in line
     debug = _cli("play", CLOPS_ID, "--policy", str(GAMMA_POLICY), "--debug")
     assert debug.returncode == 1 and "Traceback" in debug.stderr and "PolicyFileError" in debug.stderr
+
+
+def test_a_write_killed_midway_leaves_a_temporary_file_that_the_next_write_removes(tmp_path):
+    """A SIGKILL during a checkpoint save left an orphan `.checkpoint.pt.*.tmp` that nothing ever cleaned."""
+    target = tmp_path / "checkpoint.pt"
+    killed = subprocess.run([sys.executable, "-c", (
+        "import os, signal, sys\nfrom motion_envs.atomic import atomic_write\n"
+        "def write(file):\n    file.write(b'half')\n    file.flush()\n    os.kill(os.getpid(), signal.SIGKILL)\n"
+        f"atomic_write({str(target)!r}, write)\n")], timeout=60)  # fmt: skip
+    assert killed.returncode == -9
+    orphans = list(tmp_path.glob(".checkpoint.pt.*.tmp*"))
+    assert len(orphans) == 1 and not target.exists()
+    from motion_envs.atomic import atomic_write
+
+    atomic_write(target, lambda file: file.write(b"whole"))
+    assert target.read_bytes() == b"whole" and list(tmp_path.glob(".checkpoint.pt.*")) == []
+
+
+def test_a_failed_video_leaves_no_file_behind(tmp_path, monkeypatch):
+    """`play --video` wrote the mp4 in place: a failed run left a truncated video. The failure is injected after a
+    real episode has written its frames (the one stand-in here: checked inputs leave no public way to make an
+    episode fail midway)."""
+    import motion_envs.play as playing
+
+    real_episode = playing._episode
+
+    def episode_then_failure(*args, **kwargs):
+        real_episode(*args, **kwargs)
+        raise RuntimeError("stopped after the first episode")
+
+    monkeypatch.setattr(playing, "_episode", episode_then_failure)
+    video = tmp_path / "out.mp4"
+    with pytest.raises(RuntimeError, match="stopped"):
+        play(GAMMA_ID, video=video, max_primitives=1, every=4)
+    assert list(tmp_path.iterdir()) == []
+    monkeypatch.setattr(playing, "_episode", real_episode)
+    play(GAMMA_ID, video=video, max_primitives=1, every=4)
+    assert video.stat().st_size > 1000 and [path.name for path in tmp_path.iterdir()] == ["out.mp4"]

@@ -28,13 +28,16 @@ def read_amass_npz(path: str | Path, up_axis: str = "z", subject: str = "") -> B
     try:
         with np.load(path, allow_pickle=False) as data:
             arrays = {key: data[key] for key in data.files}
-    except (OSError, ValueError) as error:
-        raise MocapFormatError(path, None, f"not a readable npz ({error})") from error
+    except Exception as error:  # numpy raises OSError, ValueError, zipfile.BadZipFile, EOFError ...
+        raise MocapFormatError(path, None, f"not a readable npz ({type(error).__name__}: {error})") from error
     if up_axis not in ("y", "z"):
         raise ValueError(f"up_axis must be 'y' or 'z', got {up_axis!r}")
     rate_key = next((k for k in ("mocap_framerate", "mocap_frame_rate") if k in arrays), None)
     if "trans" not in arrays or rate_key is None:
         raise MocapFormatError(path, None, f"needs 'trans' and 'mocap_framerate'; has {sorted(arrays)}")
+    rate = np.asarray(arrays[rate_key])
+    if rate.size != 1 or not np.issubdtype(rate.dtype, np.number) or not np.isfinite(rate).all() or float(rate) <= 0:
+        raise MocapFormatError(path, None, f"{rate_key} must be one positive number, got {rate.tolist()!r}")
     trans = np.asarray(arrays["trans"], dtype=np.float64)
     if "root_orient" in arrays and "pose_body" in arrays:
         root, body = arrays["root_orient"], arrays["pose_body"][:, :63]
@@ -58,7 +61,7 @@ def read_amass_npz(path: str | Path, up_axis: str = "z", subject: str = "") -> B
     return BodyMotion(
         name=path.stem,
         subject=subject or path.parent.name,
-        fps=float(arrays[rate_key]),
+        fps=float(rate),
         transl=transl,
         global_orient=global_orient,
         body_pose=np.asarray(body, dtype=np.float64).reshape(frames, 21, 3),

@@ -2,8 +2,10 @@
 
 One `.npz` per frame rate, named by a content hash of the source files, the
 data code and the settings, so an unchanged rebuild only re-hashes and
-returns. Clips that fail to parse or retarget are reported and listed in the
-cache (`failures`), never silently dropped.
+returns. Clips that fail to parse or retarget, for any reason, are reported
+with their file and reason and listed in the cache (`failures`), never silently
+dropped, and the rest are built; every clip's values are checked finite (in
+float32, as cached) and plausible (`check_plausible`) before they enter the cache.
 """
 
 from __future__ import annotations
@@ -36,6 +38,9 @@ CACHE_CODE = (
     "data/splits.py", "body/frames.py", "body/markers.py", "body/skeleton.py",
 )  # fmt: skip
 """Modules whose code decides the cache's content (the FK implementation changes speed only)."""
+MAX_EXTENT = 1000.0
+"""Largest plausible pelvis distance from the origin (m): a capture volume is tens of metres; a clip beyond a
+kilometre holds garbage (a BVH of 1e300 offsets once became inf in the cache)."""
 DEFAULT_FPS = (30, 40)
 """WANDR runs at 30 fps, GAMMA at 40 fps."""
 CACHE_FORMAT = 1
@@ -126,6 +131,25 @@ def load_clip(source: ClipSource, fps: int, body: BodyModel, retarget_config: Re
     return canonicalise(result.motion, body)
 
 
+def check_plausible(motion: BodyMotion, relative: str) -> None:
+    """Raise ValueError naming `relative` unless the motion's arrays are finite as float32 and its pelvis stays
+    within `MAX_EXTENT` m of the origin."""
+    if motion.num_frames < 2:
+        raise ValueError(f"{relative}: {motion.num_frames} frame(s) after resampling; a clip needs at least 2")
+    for name in ("transl", "global_orient", "body_pose"):
+        values = np.asarray(getattr(motion, name), dtype=np.float64)
+        if not np.isfinite(values.astype(np.float32)).all():
+            raise ValueError(f"{relative}: non-finite {name} (values beyond float32's range or NaN)")
+    reach = float(np.abs(motion.transl).max())
+    if reach > MAX_EXTENT:
+        raise ValueError(f"{relative}: the pelvis goes {reach:.3g} m from the origin (implausible; at most {MAX_EXTENT:g} m)")
+
+
+def _failure_summary(failures: list[str], shown: int = 20) -> str:
+    lines = failures[:shown] + ([f"... and {len(failures) - shown} more"] if len(failures) > shown else [])
+    return "\n  ".join(lines)
+
+
 def build(
     mocap_dir: Path | None = None,
     cache_dir: Path | None = None,
@@ -155,12 +179,15 @@ def build(
         failures: list[str] = []
         for source in tqdm(sources, desc=f"retarget @ {fps} fps", disable=not progress, unit="clip"):
             try:
-                clips.append((source, load_clip(source, fps, body, retarget_config)))
-            except (MocapFormatError, UnknownSkeletonError, ValueError) as error:
-                failures.append(f"{source.relative}: {error}")
-                print(f"skipped {source.relative}: {error}", file=sys.stderr)
+                motion = load_clip(source, fps, body, retarget_config)
+                check_plausible(motion, source.relative)
+                clips.append((source, motion))
+            except Exception as error:  # one bad file must not abort the build: report it, build the rest
+                reason = str(error) if isinstance(error, (MocapFormatError, UnknownSkeletonError, ValueError)) else f"{type(error).__name__}: {error}"
+                failures.append(f"{source.relative}: {reason}")
+                tqdm.write(f"skipped {source.relative}: {reason}", file=sys.stderr)
         if not clips:
-            raise RuntimeError(f"every clip failed; first: {failures[0] if failures else 'none'}")
+            raise RuntimeError(f"every clip under {mocap_dir} failed ({len(failures)}):\n  {_failure_summary(failures)}")
         _write_cache(path, clips, failures, fps, mocap_dir)
         report.failures = failures
     report.clips = len(sources) - len(report.failures)

@@ -39,11 +39,16 @@ from motion_envs.data.goal_windows import GoalWindows  # noqa: E402
 from motion_envs.priors.training import announce_replacement, record_in_manifest, weights_destination  # noqa: E402
 
 
+DEFAULT_REWARDS = {"motion_envs/GammaReach-v0": "paper", "motion_envs/WandrReach-v0": "default"}
+"""Each latent-action env's default reward spec (`train ppo` without `--reward`)."""
+
+
 @dataclass
 class PPOTrainConfig:
     env_id: str = "motion_envs/GammaReach-v0"
-    reward: str = "paper"
-    """The env's reward spec (GammaReach: "paper", "release", "paper:goal=5"; WandrReach: "default")."""
+    reward: str | None = None
+    """The env's reward spec (GammaReach: "paper", "release", "paper:goal=5"; WandrReach: "default"); None: the
+    env's own default (`DEFAULT_REWARDS`)."""
     env_kwargs: dict = field(default_factory=dict)
     """Further `gym.make` arguments of the env (e.g. WandrReach's frames_per_step)."""
     alpha: float = 10.0
@@ -82,6 +87,10 @@ class PPOTrainConfig:
     command: str = ""
 
     def __post_init__(self) -> None:
+        if self.reward is None:
+            if self.env_id not in DEFAULT_REWARDS:
+                raise ValueError(f"PPO trains {sorted(DEFAULT_REWARDS)}, not {self.env_id!r}")
+            self.reward = DEFAULT_REWARDS[self.env_id]
         if self.init not in ("data", "scratch") and not Path(self.init).is_file():
             raise ValueError(f"init must be 'data', 'scratch' or a policy file, got {self.init!r} (no such file)")
         if self.keep not in ("best", "last"):

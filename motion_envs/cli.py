@@ -14,7 +14,7 @@ def _data_build(args: argparse.Namespace) -> int:
     report = build(
         mocap_dir=args.mocap_dir,
         cache_dir=args.cache_dir,
-        subsets=tuple(args.subset) if args.subset else None,
+        subsets=_subsets(args),
         fps_list=tuple(args.fps),
         progress=not args.quiet,
     )
@@ -30,7 +30,7 @@ def _data_build(args: argparse.Namespace) -> int:
 def _data_start_poses(args: argparse.Namespace) -> int:
     from motion_envs.data.start_poses import write_start_poses
 
-    path = write_start_poses(mocap_dir=args.mocap_dir, cache_dir=args.cache_dir, subsets=tuple(args.subset))
+    path = write_start_poses(mocap_dir=args.mocap_dir, cache_dir=args.cache_dir, subsets=_subsets(args))
     print(f"wrote {path}")
     return 0
 
@@ -38,7 +38,7 @@ def _data_start_poses(args: argparse.Namespace) -> int:
 def _bench_data(args: argparse.Namespace) -> int:
     from benchmarks.data_quality import main as data_quality
 
-    return data_quality(mocap_dir=args.mocap_dir, cache_dir=args.cache_dir, subsets=tuple(args.subset))
+    return data_quality(mocap_dir=args.mocap_dir, cache_dir=args.cache_dir, subsets=_subsets(args))
 
 
 def _bench_gamma(args: argparse.Namespace) -> int:
@@ -88,7 +88,7 @@ def _bench_render(args: argparse.Namespace) -> int:
 def _bench_gamma_realism(args: argparse.Namespace) -> int:
     from benchmarks.gamma_realism import main as gamma_realism
 
-    return gamma_realism(mocap_dir=args.mocap_dir, cache_dir=args.cache_dir, subsets=tuple(args.subset),
+    return gamma_realism(mocap_dir=args.mocap_dir, cache_dir=args.cache_dir, subsets=_subsets(args),
                          rollouts=args.rollouts, primitives=args.primitives, seed=args.seed)  # fmt: skip
 
 
@@ -232,7 +232,7 @@ def _delta_prior_clips(args: argparse.Namespace):
     from motion_envs.priors.train_wandr import WandrClips
     from motion_envs.priors.wandr_features import FPS
 
-    dataset = MotionDataset.load(build(mocap_dir=args.mocap_dir, cache_dir=args.cache_dir, subsets=tuple(dict.fromkeys(args.subset)),
+    dataset = MotionDataset.load(build(mocap_dir=args.mocap_dir, cache_dir=args.cache_dir, subsets=_subsets(args),
                                        fps_list=(FPS,)).caches[FPS])  # fmt: skip
     body = BodyModel()
     return dataset, WandrClips.from_dataset(dataset, "train", body, mirrored=True), WandrClips.from_dataset(dataset, "validation", body)
@@ -243,7 +243,7 @@ def _train_wandr(args: argparse.Namespace) -> int:
     from motion_envs.priors.training import weights_destination
     from motion_envs.priors.wandr import WandrConfig
 
-    subsets = tuple(dict.fromkeys(args.subset))  # `--subset hdm05` adds to the default cmu
+    subsets = _subsets(args)  # `--subset hdm05` adds to the default cmu
     dataset, train_clips, validation_clips = _delta_prior_clips(args)
     intentions = tuple(args.intentions.split(",")) if args.intentions else WandrConfig().intentions
     model = WandrConfig(intentions=intentions, learned_prior=args.learned_prior, **({"layers": args.layers} if args.layers else {}))
@@ -296,7 +296,7 @@ def _gamma_dataset(args: argparse.Namespace):
     from motion_envs.data.dataset import MotionDataset
     from motion_envs.data.primitives import GAMMA_FPS
 
-    report = build(mocap_dir=args.mocap_dir, cache_dir=args.cache_dir, subsets=tuple(args.subset), fps_list=(GAMMA_FPS,))
+    report = build(mocap_dir=args.mocap_dir, cache_dir=args.cache_dir, subsets=_subsets(args), fps_list=(GAMMA_FPS,))
     return MotionDataset.load(report.caches[GAMMA_FPS])
 
 
@@ -355,10 +355,24 @@ def _train_gamma_pose_vae(args: argparse.Namespace, dataset, common: dict) -> di
 
 
 def _add_data_args(parser: argparse.ArgumentParser, default_subsets: list[str] | None) -> None:
-    parser.add_argument("--mocap-dir", type=Path, default=None, help="mocap folder (default: $MOTION_ENVS_DATA or ../shared/mocap)")
+    parser.add_argument("--mocap-dir", type=Path, default=None,
+                        help="the folder holding the clips, any layout (default: $MOTION_ENVS_DATA or ../shared/mocap)")  # fmt: skip
     parser.add_argument("--cache-dir", type=Path, default=None, help="cache folder (default: $MOTION_ENVS_CACHE or ~/.cache/motion_envs)")
-    parser.add_argument("--subset", action="append", default=default_subsets,
-                        help="only this subfolder of the mocap folder (repeatable)")  # fmt: skip
+    default = f" (default: {', '.join(default_subsets)} where the folder has it, else all of it)" if default_subsets else " (default: all of it)"
+    parser.add_argument("--subset", action="append", default=None,
+                        help="also read this subfolder of the mocap folder (repeatable)" + default)  # fmt: skip
+    parser.set_defaults(default_subsets=default_subsets or [])
+
+
+def _subsets(args: argparse.Namespace) -> tuple[str, ...]:
+    """The mocap subfolders a command reads: its default subfolders (cmu) that the mocap folder has, then every
+    `--subset`; empty: the whole folder. `--mocap-dir` so means one thing for every command, the folder holding the
+    clips, with or without a cmu/ subfolder."""
+    from motion_envs.data.paths import default_mocap_dir
+
+    folder = args.mocap_dir or default_mocap_dir()
+    present = [name for name in args.default_subsets if folder is not None and (Path(folder) / name).is_dir()]
+    return tuple(dict.fromkeys([*present, *(args.subset or [])]))
 
 
 def parser() -> argparse.ArgumentParser:
@@ -391,7 +405,8 @@ def parser() -> argparse.ArgumentParser:
     train.add_argument("--ship", action="store_true",
                        help="write the weights into the package (motion_envs/priors/weights/ + manifest.json), replacing the shipped ones")
     train.add_argument("--env", default=None, help="ppo: environment id (default motion_envs/GammaReach-v0)")
-    train.add_argument("--reward", default=None, help="ppo: reward config, paper | release")
+    train.add_argument("--reward", default=None,
+                       help="ppo: reward config (GammaReach: paper (default) | release | paper:goal=5; WandrReach: default)")
     train.add_argument("--alpha", type=float, default=None, help="ppo: weight of the KL-to-prior regulariser (paper: 1, 10)")
     train.add_argument("--num-envs", type=int, default=None, help="ppo, dqn: bodies stepped together")
     train.add_argument("--timesteps", type=int, default=None, help="ppo, dqn: total env steps (primitives; dqn: actions)")

@@ -96,6 +96,7 @@ from motion_envs.body.head_camera import camera_from_head
 from motion_envs.body.rotations import about_z, matrix_to_sixd
 from motion_envs.counter_random import counter_normal
 from motion_envs.envs.core import CoreVectorEnv, check_actions, config_from_kwargs
+from motion_envs.envs.options import check_known, index, number, point, real_array
 from motion_envs.envs.starts import DeltaPriorBodies, StartBodies
 from motion_envs.metrics import lowest_foot, track_skating
 from motion_envs.priors.clops import ClopsPrior, ClopsStepper, HeadPose, action_targets, head_pose, head_yaw, yaw_change
@@ -124,6 +125,40 @@ def looked_bins(yaw: torch.Tensor, fov: float) -> torch.Tensor:
     centres = torch.arange(LOOK_BINS, device=yaw.device) * (2 * math.pi / LOOK_BINS)
     offset = torch.remainder(centres - yaw[:, None] + math.pi, 2 * math.pi) - math.pi
     return offset.abs() <= math.radians(fov) / 2
+
+
+GOAL_CEILING = 3.0
+"""Highest goal centre a `goal` reset option may ask for (m): the rooms' walls are lower."""
+
+
+def scene_seed_option(options: dict[str, Any], bodies: int) -> np.ndarray | None:
+    """(bodies,) int64 scene seeds of the `scene_seed` option (one seed for all, or one per body), or None."""
+    if "scene_seed" not in options:
+        return None
+    seeds = real_array(options["scene_seed"], "scene_seed")
+    if seeds.ndim > 1 or (seeds.ndim == 1 and len(seeds) != bodies):
+        raise ValueError(f"option 'scene_seed' must be one seed or one per body ({bodies}), got shape {seeds.shape}")
+    if (seeds != np.round(seeds)).any() or (seeds < 0).any():
+        raise ValueError(f"option 'scene_seed' must be non-negative integers, got {options['scene_seed']!r}")
+    return np.broadcast_to(seeds.astype(np.int64), (bodies,))
+
+
+def check_start(scene: Scene, start: np.ndarray) -> np.ndarray:
+    """`start` (2,), checked to lie inside the scene's room (its walkable rectangle). A start inside furniture is
+    allowed (the body collides from the first action; a test uses it)."""
+    x0, y0, x1, y1 = scene.walkable_bounds
+    if not (x0 <= start[0] <= x1 and y0 <= start[1] <= y1):
+        raise ValueError(f"option 'start' {start.tolist()} lies outside {scene.name}: x {x0:.2f}..{x1:.2f}, y {y0:.2f}..{y1:.2f}")
+    return start
+
+
+def check_goal(scene: Scene, goal: np.ndarray) -> np.ndarray:
+    """`goal` (3,), checked to lie inside the scene's room: over its walkable rectangle, 0..`GOAL_CEILING` m up."""
+    x0, y0, x1, y1 = scene.walkable_bounds
+    if not (x0 <= goal[0] <= x1 and y0 <= goal[1] <= y1 and 0.0 <= goal[2] <= GOAL_CEILING):
+        raise ValueError(f"option 'goal' {goal.tolist()} lies outside {scene.name}: x {x0:.2f}..{x1:.2f}, y {y0:.2f}..{y1:.2f}, "
+                         f"z 0..{GOAL_CEILING:g}")  # fmt: skip
+    return goal
 
 
 @dataclasses.dataclass(frozen=True)
@@ -305,35 +340,27 @@ class ClopsNavCore:
 
     def sample_initial_state(self, rngs: list[np.random.Generator], options: dict[str, Any] | None = None) -> ClopsNavState:
         """One random episode per generator; `options` (see the module doc) apply to every body."""
-        options = dict(options or {})
-        unknown = set(options) - set(RESET_OPTIONS)
-        if unknown:
-            raise ValueError(f"unknown reset options {sorted(unknown)}; known: {', '.join(RESET_OPTIONS)}")
+        options = check_known(options, RESET_OPTIONS)
         config, seeds, families = self.config, self.config.seeds, self.config.families
         slots, starts, goals, facings, rows, keys = [], [], [], [], [], []
-        given_seeds = options.get("scene_seed")
-        if given_seeds is not None and np.ndim(given_seeds) == 1 and len(given_seeds) != len(rngs):
-            raise ValueError(f"scene_seed must be one seed or one per body ({len(rngs)}), got {len(given_seeds)}")
+        given_seeds = scene_seed_option(options, len(rngs))
+        given_start, given_goal = point(options, "start", 2), point(options, "goal", 3)
+        given_facing, given_row = number(options, "facing"), index(options, "start_index", len(self.starts))
         for body_index, rng in enumerate(rngs):  # per-body draws from its own generator (a few numbers each)
             # a single family draws nothing, so its episodes stay those of the same seeds before `mixed` existed
             family = families[int(rng.integers(len(families)))] if len(families) > 1 else families[0]
             drawn = seeds[int(rng.integers(len(seeds)))]
-            seed = drawn if given_seeds is None else int(given_seeds[body_index] if np.ndim(given_seeds) == 1 else given_seeds)
-            slots.append(self.slot(family, seed))
+            slots.append(self.slot(family, drawn if given_seeds is None else int(given_seeds[body_index])))
             scene = self.slots[slots[-1]].scene
             start, goal = scene.sample_start_goal(rng, config.min_goal_distance)
             height = rng.uniform(*config.goal_height)
-            starts.append(np.asarray(options.get("start", start), dtype=np.float32))
-            goals.append(np.asarray(options.get("goal", (*goal, height)), dtype=np.float32))
-            facings.append(float(options.get("facing", rng.uniform(-math.pi, math.pi))))
-            rows.append(int(options.get("start_index", rng.integers(len(self.starts)))))
+            starts.append(start if given_start is None else check_start(scene, given_start))
+            goals.append(np.array([*goal, height]) if given_goal is None else check_goal(scene, given_goal))
+            facings.append(given_facing if given_facing is not None else float(rng.uniform(-math.pi, math.pi)))
+            rows.append(given_row if given_row is not None else int(rng.integers(len(self.starts))))
             keys.append(int(rng.integers(1 << 62)))
-        goal = torch.as_tensor(np.stack(goals), device=self.device)
-        if goal.shape != (len(rngs), 3) or not torch.isfinite(goal).all():
-            raise ValueError(f"goal must be a finite (x, y, z), got {options.get('goal')}")
-        position = torch.as_tensor(np.stack(starts), device=self.device)
-        if position.shape != (len(rngs), 2):
-            raise ValueError(f"start must be an (x, y) position, got {options.get('start')}")
+        goal = torch.as_tensor(np.stack(goals), dtype=torch.float32, device=self.device)
+        position = torch.as_tensor(np.stack(starts), dtype=torch.float32, device=self.device)
         body, feet = self.starts.place(torch.tensor(rows), torch.tensor(facings, dtype=torch.float32), position)
         count, zeros = len(rngs), torch.zeros(len(rngs), dtype=torch.long, device=self.device)
         lowest_id, lowest_xy = lowest_foot(feet)
@@ -606,10 +633,10 @@ class ClopsNavVectorEnv(CoreVectorEnv):
     Renders draw the first `render_bodies` bodies (default 1) in the first body's room, with its view inset."""
 
     def __init__(self, num_envs: int = 1, prior: ClopsPrior | None = None, render_mode: str | None = None,
-                 render_bodies: int = 1, **kwargs: Any) -> None:  # fmt: skip
+                 render_bodies: int = 1, autoreset_mode: str = "same_step", **kwargs: Any) -> None:  # fmt: skip
         self.config = config_from_kwargs(ClopsNavConfig, kwargs, "ClopsNav-v0")
         core = ClopsNavCore(self.config, prior)
-        super().__init__(core, num_envs, *_spaces(core), render_mode, render_bodies)
+        super().__init__(core, num_envs, *_spaces(core), render_mode, render_bodies, autoreset_mode)
         self.metadata = {**self.metadata, "render_fps": 1}
 
     def render(self) -> np.ndarray | None:

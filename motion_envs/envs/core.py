@@ -4,6 +4,9 @@ vector env over a batched core."""
 from __future__ import annotations
 
 import dataclasses
+import os
+import types
+import typing
 from typing import Any, Protocol, TypeVar
 
 import gymnasium as gym
@@ -19,13 +22,36 @@ from motion_envs.scenes.scene import Scene
 Config = TypeVar("Config")
 
 
+def _single_threaded_after_fork() -> None:
+    """A forked child of a process whose torch thread pool has run deadlocks in its first parallel region (measured:
+    `gym.make_vec(..., vectorization_mode="async")`, whose default on Linux is fork, hung in `reset` for every env;
+    its spaces come from an env built in the parent). A forked child runs torch on one thread: one env per process
+    is what async vector envs are for. The spawn context needs nothing."""
+    torch.set_num_threads(1)
+
+
+os.register_at_fork(after_in_child=_single_threaded_after_fork)
+
+
 def check_actions(actions: Any, shape: tuple[int, ...], batch: int | None) -> np.ndarray:
-    """Actions as float32, checked: `shape` for one body (batch None) or (batch, *shape); all finite.
+    """Actions as float32, checked: real numbers (numpy, lists, Python numbers or torch tensors, detached), `shape`
+    for one body (batch None) or (batch, *shape); all finite.
 
     Raises:
-        ValueError: naming the expected and received shape, or the non-finite entries.
+        ValueError: naming the expected and received shape, a non-numeric type (None, strings, complex, bool) or the
+        non-finite entries.
     """
-    array = np.asarray(actions, dtype=np.float32)
+    if actions is None:
+        raise ValueError(f"action is None; expected real numbers of shape {tuple(shape) if batch is None else (batch, *shape)}")
+    if isinstance(actions, torch.Tensor):
+        actions = actions.detach().cpu().numpy()
+    try:
+        raw = np.asarray(actions)
+    except ValueError as error:  # ragged sequences
+        raise ValueError(f"action must be a regular array of numbers, got {actions!r}") from error
+    if raw.dtype.kind not in "iuf":
+        raise ValueError(f"action must hold real numbers, got {type(actions).__name__} of dtype {raw.dtype}: {actions!r}"[:300])
+    array = raw.astype(np.float32)
     expected = tuple(shape) if batch is None else (batch, *shape)
     if array.shape != expected:
         raise ValueError(f"action must have shape {expected}, got {array.shape}")
@@ -36,13 +62,57 @@ def check_actions(actions: Any, shape: tuple[int, ...], batch: int | None) -> np
 
 
 def config_from_kwargs(config_type: type[Config], kwargs: dict[str, Any], env_name: str) -> Config:
-    """`config_type(**kwargs)`, with unknown keys reported by name next to the valid ones."""
+    """`config_type(**kwargs)`, with unknown keys reported by name next to the valid ones and values of the wrong
+    type (`check_field_type`) by name, with the type expected."""
     valid = {field.name for field in dataclasses.fields(config_type)}
     unknown = sorted(set(kwargs) - valid)
     if unknown:
         raise TypeError(f"{env_name} got unknown arguments {unknown}; valid: {sorted(valid)}")
+    hints = typing.get_type_hints(config_type)
+    for name, value in kwargs.items():
+        if not check_field_type(value, hints[name]):
+            raise TypeError(f"{env_name} argument {name!r} must be {_type_name(hints[name])}, got {value!r} ({type(value).__name__})")
     return config_type(**kwargs)
 
+
+def check_field_type(value: Any, hint: Any) -> bool:
+    """Whether `value` fits a config field's type: int (not bool, no float), float (a real number, not NaN), bool,
+    str, None, unions, tuples (fixed or `...`) and dicts of those; other types (reward configs, which also take
+    their names as strings) are left to the config's own checks."""
+    origin, arguments = typing.get_origin(hint), typing.get_args(hint)
+    if origin in (typing.Union, types.UnionType):
+        return any(check_field_type(value, argument) for argument in arguments)
+    if hint is type(None):
+        return value is None
+    if hint is bool:
+        return isinstance(value, (bool, np.bool_))
+    if hint is int:
+        return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
+    if hint is float:
+        real = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
+        return real and not np.isnan(value)
+    if hint is str:
+        return isinstance(value, str)
+    if origin is tuple:
+        if not isinstance(value, (tuple, list)):
+            return False
+        if len(arguments) == 2 and arguments[1] is Ellipsis:
+            return all(check_field_type(item, arguments[0]) for item in value)
+        return len(value) == len(arguments) and all(check_field_type(item, kind) for item, kind in zip(value, arguments))
+    if origin is dict or hint is dict:
+        return isinstance(value, dict)
+    return True
+
+
+def _type_name(hint: Any) -> str:
+    """'int', 'tuple[float, float]', 'str | None'."""
+    plain = typing.get_origin(hint) is None and hasattr(hint, "__name__")
+    return hint.__name__ if plain else str(hint).replace("typing.", "").replace("NoneType", "None")
+
+
+AUTORESET_MODES = {AutoresetMode.SAME_STEP: AutoresetMode.SAME_STEP, AutoresetMode.NEXT_STEP: AutoresetMode.NEXT_STEP,
+                   "same_step": AutoresetMode.SAME_STEP, "next_step": AutoresetMode.NEXT_STEP}  # fmt: skip
+"""The vector envs' autoreset modes, by enum or name."""
 
 Observation = Any
 """A batch of observations: an array (N, ...) or a dict of them."""
@@ -87,9 +157,12 @@ class BatchedCore(Protocol):
 
 
 class CoreVectorEnv(VectorEnv):
-    """N bodies of one batched core; same-step autoreset (ended bodies restart at once, without options,
-    as Gymnasium's own vector envs do; their last observation and info are in `info["final_obs"]` /
-    `info["final_info"]`). Subclasses build the core and say what goes into `info` (`_step_info`).
+    """N bodies of one batched core. Same-step autoreset by default (ended bodies restart at once, without
+    options, as Gymnasium's own vector envs do; their last observation and info are in `info["final_obs"]` /
+    `info["final_info"]`; SB3's adapter `agents.vec_env.NativeVecEnv` needs it). `autoreset_mode="next_step"`
+    (Gymnasium's default mode, which its vector `NormalizeObservation` requires): the step that ends a body returns
+    its last observation and info; its next step ignores its action and returns its new start (reward 0, neither
+    terminated nor truncated). Subclasses build the core and say what goes into `info` (`_step_info`).
 
     `render_mode="rgb_array"`: `render()` draws the first `render_bodies` bodies in one image (camera on
     their mean pelvis), each with its goal and pelvis trail, in the core's `render_scene(state)` where the
@@ -99,9 +172,14 @@ class CoreVectorEnv(VectorEnv):
 
     def __init__(self, core: BatchedCore, num_envs: int, single_action_space: gym.spaces.Box,
                  single_observation_space: gym.spaces.Box, render_mode: str | None = None,
-                 render_bodies: int = 8) -> None:  # fmt: skip
+                 render_bodies: int = 8, autoreset_mode: AutoresetMode | str = AutoresetMode.SAME_STEP) -> None:  # fmt: skip
         if render_mode not in (None, *self.metadata["render_modes"]):
             raise ValueError(f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}")
+        if autoreset_mode not in AUTORESET_MODES:
+            raise ValueError(f"autoreset_mode must be one of {sorted(map(str, AUTORESET_MODES))}, got {autoreset_mode!r}")
+        self.metadata = {**self.metadata, "autoreset_mode": AUTORESET_MODES[autoreset_mode]}
+        self._restart_next = torch.zeros(num_envs, dtype=torch.bool)
+        """NEXT_STEP mode: bodies that ended in the last step and restart in the next one."""
         self.render_mode, self.render_bodies = render_mode, render_bodies
         self._view: EnvView | None = None
         self._view_scene: Scene | None = None
@@ -119,6 +197,7 @@ class CoreVectorEnv(VectorEnv):
             seeds = seed if isinstance(seed, list) else [seed + i for i in range(self.num_envs)]
             self.rngs = [np.random.default_rng(s) for s in seeds]  # body i follows the single env reset with seed + i
         self.state = self.core.sample_initial_state(self.rngs, options)
+        self._restart_next[:] = False
         if self.render_mode is not None:
             self.trails = [[pelvis] for pelvis in self._drawn_pelvis()]
         return as_numpy(self.core.observe(self.state)), {}
@@ -133,25 +212,41 @@ class CoreVectorEnv(VectorEnv):
         z = check_actions(actions, self.single_action_space.shape, batch=self.num_envs)
         self.state, result = self.core.step(self.state, torch.as_tensor(z))
         done = (result.terminated | result.truncated).cpu()
+        reward = result.reward.cpu().numpy().astype(np.float64)
+        terminated, truncated = result.terminated.cpu().numpy(), result.truncated.cpu().numpy()
         observation = as_numpy(self.core.observe(self.state))
         info, final = self._step_info(result)
-        if done.any():
-            ended = torch.nonzero(done).flatten()
-            info["final_obs"] = np.empty(self.num_envs, dtype=object)  # one observation per ended body, None elsewhere
-            for i in ended.tolist():
-                info["final_obs"][i] = _rows(observation, i)
-            info["final_info"] = {**final, **{f"_{name}": done.numpy() for name in final}}
-            info["_final_obs"] = info["_final_info"] = done.numpy()
-            fresh = self.core.sample_initial_state([self.rngs[i] for i in ended.tolist()])
-            order = torch.zeros(self.num_envs, dtype=torch.long)
-            order[ended] = torch.arange(len(ended))  # fresh body k goes to row ended[k]; other rows are masked
-            self.state = self.state.replace_bodies(done.to(self.core.device), fresh.index(order.to(self.core.device)))
-            _set_rows(observation, ended.numpy(), as_numpy(self.core.observe(fresh)))  # only the new bodies are observed
+        if self.metadata["autoreset_mode"] == AutoresetMode.NEXT_STEP:
+            restarted = self._restart_next  # ended last step: this step only restarts them (its motion is dropped)
+            done = done & ~restarted
+            self._restart_next = done
+            reward[restarted.numpy()] = 0.0
+            terminated[restarted.numpy()] = truncated[restarted.numpy()] = False
+            if done.any():  # Gymnasium's next-step convention: the ending step's info holds the episode's figures
+                info.update({**final, **{f"_{name}": done.numpy() for name in final}})
+        else:
+            restarted = done
+            if done.any():
+                info["final_obs"] = np.empty(self.num_envs, dtype=object)  # one observation per ended body, None elsewhere
+                for i in torch.nonzero(done).flatten().tolist():
+                    info["final_obs"][i] = _rows(observation, i)
+                info["final_info"] = {**final, **{f"_{name}": done.numpy() for name in final}}
+                info["_final_obs"] = info["_final_info"] = done.numpy()
+        if restarted.any():
+            self._restart(restarted, observation)
         if self.render_mode is not None:
-            for trail, pelvis, restarted in zip(self.trails, self._drawn_pelvis(), done.tolist()):
-                trail[:] = [pelvis] if restarted else [*trail, pelvis]
-        return (observation, result.reward.cpu().numpy().astype(np.float64), result.terminated.cpu().numpy(),
-                result.truncated.cpu().numpy(), info)  # fmt: skip
+            for trail, pelvis, new in zip(self.trails, self._drawn_pelvis(), restarted.tolist()):
+                trail[:] = [pelvis] if new else [*trail, pelvis]
+        return observation, reward, terminated, truncated, info
+
+    def _restart(self, rows: torch.Tensor, observation: Observation) -> None:
+        """Start new episodes for the bodies where `rows` (N,) bool is true, writing their observations in place."""
+        ended = torch.nonzero(rows).flatten()
+        fresh = self.core.sample_initial_state([self.rngs[i] for i in ended.tolist()])
+        order = torch.zeros(self.num_envs, dtype=torch.long)
+        order[ended] = torch.arange(len(ended))  # fresh body k goes to row ended[k]; other rows are masked
+        self.state = self.state.replace_bodies(rows.to(self.core.device), fresh.index(order.to(self.core.device)))
+        _set_rows(observation, ended.numpy(), as_numpy(self.core.observe(fresh)))  # only the new bodies are observed
 
     def render(self) -> np.ndarray | None:
         """rgb_array: (H, W, 3) uint8 of the first `render_bodies` bodies (None without a render mode)."""

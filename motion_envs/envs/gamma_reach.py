@@ -80,6 +80,7 @@ from motion_envs.body.markers import foot_vertex_ids
 from motion_envs.data.primitives import GAMMA_FPS
 from motion_envs.data.start_poses import load_start_poses
 from motion_envs.envs.core import CoreVectorEnv, check_actions, config_from_kwargs
+from motion_envs.envs.options import check_known, index, number, point
 from motion_envs.metrics import contact_score, marker_speeds
 from motion_envs.priors.canonical import PELVIS, goal_observation
 from motion_envs.priors.gamma_generator import GammaGenerator, GammaSeed, Primitive
@@ -97,6 +98,7 @@ from motion_envs.rewards import (
 
 OBSERVATION_SIZE = 2 * 67 * 6
 START_KINDS = ("any", "standing", "walking")
+RESET_OPTIONS = ("goal", "start_index", "facing")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -196,17 +198,16 @@ class GammaReachCore:
         """One random start per generator (the single env has one; the vector env one per body).
 
         `options` may fix `goal` ((x, y)), `start_index` and `facing` for every body."""
-        options = dict(options or {})
-        unknown = set(options) - {"goal", "start_index", "facing"}
-        if unknown:
-            raise ValueError(f"unknown reset options {sorted(unknown)}; known: goal, start_index, facing")
+        options = check_known(options, RESET_OPTIONS)
+        given_row, given_facing = index(options, "start_index", self.num_starts), number(options, "facing")
+        given_goal = point(options, "goal", 2)
         rows, facings, goals = [], [], []
         half = self.config.area / 2.0
         for rng in rngs:  # a few scalar draws per body at reset, so each body's episode follows its own seed
-            rows.append(int(options["start_index"]) if "start_index" in options else int(rng.choice(self.start_rows)))
-            facings.append(float(options["facing"]) if "facing" in options else float(rng.uniform(-math.pi, math.pi)))
-            if "goal" in options:
-                goals.append(np.asarray(options["goal"], dtype=np.float64).reshape(2))
+            rows.append(given_row if given_row is not None else int(rng.choice(self.start_rows)))
+            facings.append(given_facing if given_facing is not None else float(rng.uniform(-math.pi, math.pi)))
+            if given_goal is not None:
+                goals.append(given_goal)
                 continue
             goal = rng.uniform(-half, half, size=2)
             while np.linalg.norm(goal) < self.config.min_goal_distance:
@@ -340,12 +341,12 @@ class GammaReachVectorEnv(CoreVectorEnv):
     """N bodies in one batched core; same-step autoreset (see `CoreVectorEnv`)."""
 
     def __init__(self, num_envs: int = 1, generator: GammaGenerator | None = None, render_mode: str | None = None,
-                 render_bodies: int = 8, **kwargs: Any) -> None:  # fmt: skip
+                 render_bodies: int = 8, autoreset_mode: str = "same_step", **kwargs: Any) -> None:  # fmt: skip
         self.config = config_from_kwargs(GammaReachConfig, kwargs, "GammaReach-v0")
         core = GammaReachCore(self.config, generator)
         bound = self.config.latent_bound
         super().__init__(core, num_envs, gym.spaces.Box(-bound, bound, (core.generator.latent_size,), np.float32),
-                         gym.spaces.Box(-np.inf, np.inf, (OBSERVATION_SIZE,), np.float32), render_mode, render_bodies)  # fmt: skip
+                         gym.spaces.Box(-np.inf, np.inf, (OBSERVATION_SIZE,), np.float32), render_mode, render_bodies, autoreset_mode)  # fmt: skip
         self.last_primitive: Primitive | None = None
 
     def _step_info(self, result: GammaStepResult) -> tuple[dict[str, Any], dict[str, np.ndarray]]:

@@ -92,6 +92,7 @@ from motion_envs.batched import where_bodies
 from motion_envs.body import BodyModel
 from motion_envs.body.rotations import matrix_to_sixd
 from motion_envs.envs.core import CoreVectorEnv, check_actions, config_from_kwargs
+from motion_envs.envs.options import check_known, index, number, point, points
 from motion_envs.envs.starts import DeltaPriorBodies, StartBodies
 from motion_envs.metrics import lowest_foot, track_skating
 from motion_envs.priors.train_wandr import load_wandr
@@ -241,32 +242,26 @@ class WandrReachCore:
 
     def sample_initial_state(self, rngs: list[np.random.Generator], options: dict[str, Any] | None = None) -> WandrReachState:
         """One random start per generator; `options` (see the module doc) apply to every body."""
-        options = dict(options or {})
-        unknown = set(options) - set(RESET_OPTIONS)
-        if unknown:
-            raise ValueError(f"unknown reset options {sorted(unknown)}; known: {', '.join(RESET_OPTIONS)}")
+        options = check_known(options, RESET_OPTIONS)
         if "goal" in options and "goals" in options:
             raise ValueError("give either 'goal' or 'goals', not both")
         config = self.config
-        rows = [int(options["start_index"]) if "start_index" in options else int(rng.integers(self.num_starts)) for rng in rngs]
-        facings = [float(options["facing"]) if "facing" in options else float(rng.uniform(-math.pi, math.pi)) for rng in rngs]
+        given_row, given_facing = index(options, "start_index", self.num_starts), number(options, "facing")
+        rows = [given_row if given_row is not None else int(rng.integers(self.num_starts)) for rng in rngs]
+        facings = [given_facing if given_facing is not None else float(rng.uniform(-math.pi, math.pi)) for rng in rngs]
         draws = np.array([[rng.uniform(*config.goal_angle), rng.uniform(*config.goal_height), rng.uniform(*config.goal_distance)]
                           for rng in rngs])  # fmt: skip
         start_index, facing = torch.tensor(rows), torch.tensor(facings, dtype=torch.float32)
         count = len(rngs)
-        if "goals" in options or "goal" in options:
-            given = np.asarray(options["goals"] if "goals" in options else [options["goal"]], dtype=np.float32)
-            if given.ndim != 2 or given.shape[1] != 3 or len(given) == 0 or not np.isfinite(given).all():
-                raise ValueError(f"goals must be finite (x, y, z) points, got shape {given.shape}")
-            goals = torch.as_tensor(given).expand(count, -1, -1)
+        given = points(options, "goals", 3) if "goals" in options else point(options, "goal", 3)
+        if given is not None:
+            goals = torch.as_tensor(given.reshape(-1, 3), dtype=torch.float32).expand(count, -1, -1)
         else:
             goals = self.cylinder_goals(start_index, facing, *torch.as_tensor(draws.T, dtype=torch.float32))[:, None]
-        goal_time = torch.full((count,), int(options.get("goal_time", -1)), dtype=torch.long)
-        if "goal_time" in options and goal_time[0] < 1:
-            raise ValueError(f"goal_time must be a positive number of frames, got {options['goal_time']}")
-        velocity = torch.as_tensor(np.asarray(options.get("goal_velocity", (0.0, 0.0, 0.0)), dtype=np.float32)).reshape(1, 3)
-        if not torch.isfinite(velocity).all():
-            raise ValueError("goal_velocity must be finite")
+        due = index(options, "goal_time", np.iinfo(np.int64).max, low=1)
+        goal_time = torch.full((count,), -1 if due is None else due, dtype=torch.long)
+        velocity = point(options, "goal_velocity", 3)
+        velocity = torch.zeros(1, 3) if velocity is None else torch.as_tensor(velocity, dtype=torch.float32).reshape(1, 3)
         return self.initial_state(start_index, facing, goals, torch.full((count,), goals.shape[1]), goal_time,
                                   velocity.expand(count, 3))  # fmt: skip
 
@@ -399,10 +394,10 @@ class WandrReachVectorEnv(CoreVectorEnv):
     """N bodies in one batched core; same-step autoreset (see `CoreVectorEnv`)."""
 
     def __init__(self, num_envs: int = 1, prior: WandrPrior | None = None, render_mode: str | None = None,
-                 render_bodies: int = 8, **kwargs: Any) -> None:  # fmt: skip
+                 render_bodies: int = 8, autoreset_mode: str = "same_step", **kwargs: Any) -> None:  # fmt: skip
         self.config = config_from_kwargs(WandrReachConfig, kwargs, "WandrReach-v0")
         core = WandrReachCore(self.config, prior)
-        super().__init__(core, num_envs, *_spaces(core), render_mode, render_bodies)
+        super().__init__(core, num_envs, *_spaces(core), render_mode, render_bodies, autoreset_mode)
         self.metadata = {**self.metadata, "render_fps": FPS / self.config.frames_per_step}
 
     def _step_info(self, result: WandrStepResult) -> tuple[dict[str, Any], dict[str, np.ndarray]]:

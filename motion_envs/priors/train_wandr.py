@@ -261,7 +261,7 @@ def validate(model: WandrPrior, clips: WandrClips, targets: HindsightTargets, co
 def default_weights(config: WandrConfig, subsets: tuple[str, ...] = ("cmu",)) -> str:
     """The weights' file name: wandr.pt for the full model on CMU; ablations and data variants get suffixes."""
     suffix = "" if tuple(config.intentions) == INTENTIONS else "_" + "_".join(config.intentions)
-    data = "" if tuple(subsets) == ("cmu",) else "_" + "_".join(subsets)
+    data = "" if tuple(subsets) in ((), ("cmu",)) else "_" + "_".join(subsets)
     return f"wandr{suffix}{data}.pt"
 
 

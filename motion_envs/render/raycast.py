@@ -32,6 +32,13 @@ class RayCaster:
         self._scene = rtcore_scene.EmbreeScene(device())
         TriangleMesh(self._scene, self.vertices, self.faces)
 
+    def __getstate__(self) -> dict:
+        """Pickled (and deep-copied) without the embree scene, which cannot be; `__setstate__` rebuilds it."""
+        return {"vertices": self.vertices, "faces": self.faces}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__init__(state["vertices"], state["faces"])
+
     def cast(self, origins: np.ndarray, directions: np.ndarray, parallel: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """origins, directions: (R, 3) (directions unit). Returns the hit triangle (R,) int (-1: none) and the
         distance along the ray (R,) float32 (+inf where nothing is hit).

@@ -8,6 +8,7 @@ import subprocess
 import sys
 import zipfile
 
+import numpy as np
 import pytest
 
 from agents.policy_files import PolicyFileError, expect_policy, read_policy_file
@@ -104,3 +105,167 @@ def test_a_failed_video_leaves_no_file_behind(tmp_path, monkeypatch):
     monkeypatch.setattr(playing, "_episode", real_episode)
     play(GAMMA_ID, video=video, max_primitives=1, every=4)
     assert video.stat().st_size > 1000 and [path.name for path in tmp_path.iterdir()] == ["out.mp4"]
+
+
+ENV_IDS = (GAMMA_ID, WANDR_ID, CLOPS_ID)
+SMALL = {GAMMA_ID: {}, WANDR_ID: {}, CLOPS_ID: {"scene_seeds": (1000,)}}
+
+
+@pytest.fixture(scope="module")
+def envs():
+    import gymnasium as gym
+
+    return {env_id: gym.make(env_id, **SMALL[env_id]).unwrapped for env_id in ENV_IDS}
+
+
+def test_nan_inf_and_mistyped_reset_options_are_refused_by_name(envs):
+    """NaN or inf goals and facings gave NaN observations (on ClopsNav behind finite views), starts and goals
+    outside the room were accepted, and 120.9, "120", "far" or a 2-vector were cast or failed without a name."""
+    cases = {
+        GAMMA_ID: [("goal", (float("nan"), 1.0)), ("goal", (1.0, float("inf"))), ("facing", float("nan")), ("goal", "far"),
+                   ("start_index", 120.9), ("start_index", "1"), ("start_index", 10**6), ("goal", (1.0, 2.0, 3.0))],
+        WANDR_ID: [("goal", (1.0, float("nan"), 1.0)), ("facing", float("inf")), ("start_index", 10**6), ("goal", "far"),
+                   ("goal_velocity", (1.0, 2.0)), ("goal_time", 120.9), ("goal_time", "120"), ("goals", [])],
+        CLOPS_ID: [("start", (float("nan"), 1.0)), ("facing", float("inf")), ("goal", (1.0, 1.0, float("nan"))),
+                   ("start", (100.0, 0.0)), ("goal", (1.0, 1.0, 9.0)), ("scene_seed", 1.5), ("start_index", True)],
+    }  # fmt: skip
+    for env_id, bad in cases.items():
+        for name, value in bad:
+            with pytest.raises(ValueError, match=f"'{name}'"):
+                envs[env_id].reset(seed=0, options={name: value})
+    observation, _ = envs[WANDR_ID].reset(seed=0, options={"goal_time": 120.0, "goal": (0.5, 2.0, 1.2)})  # integral: fine
+    assert np.isfinite(observation).all()
+
+
+def test_mistyped_env_arguments_are_refused_by_name():
+    import gymnasium as gym
+
+    for env_id, name, value in ((GAMMA_ID, "max_primitives", "abc"), (GAMMA_ID, "max_primitives", 2.5),
+                                (GAMMA_ID, "area", float("nan")), (CLOPS_ID, "width", "64"), (CLOPS_ID, "goal_height", (0.8,)),
+                                (WANDR_ID, "frames_per_step", None)):  # fmt: skip
+        with pytest.raises(TypeError, match=f"argument '{name}' must be"):
+            gym.make(env_id, **{name: value})
+
+
+def test_actions_of_the_wrong_type_are_refused_by_name_and_torch_actions_work(envs):
+    """ClopsNav's None said "contains NaN or inf", complex and numeric-string actions were taken silently, and a
+    torch action that requires grad crashed in `.numpy()`."""
+    import torch
+
+    for env_id, env in envs.items():
+        env.reset(seed=0)
+        for bad in (None, "3", 1 + 2j, True, [[1.0], [1.0, 2.0]]):
+            with pytest.raises(ValueError, match="action"):
+                env.step(bad)
+    gamma = envs[GAMMA_ID]
+    _, reward, *_ = gamma.step(torch.zeros(128, requires_grad=True))
+    assert np.isfinite(reward)
+
+
+def _random_value(rng: np.random.Generator):
+    kinds = [None, "x", "12", 1 + 1j, True, float("nan"), float("inf"), -float("inf"), 1e300, -5, 0, 3, 2.5, (), [],
+             [1.0], [1.0, 2.0], [1.0, 2.0, 3.0], [[1.0, 2.0, 3.0]], [float("nan")] * 3, {"a": 1}, np.zeros((2, 2))]  # fmt: skip
+    value = kinds[int(rng.integers(len(kinds)))]
+    return np.asarray(value) * rng.uniform(-3, 3) if isinstance(value, list) and value and rng.random() < 0.3 else value
+
+
+OPTIONS = {GAMMA_ID: ("goal", "start_index", "facing"),
+           WANDR_ID: ("goal", "goal_time", "goals", "goal_velocity", "start_index", "facing"),
+           CLOPS_ID: ("scene_seed", "start", "goal", "facing", "start_index")}  # fmt: skip
+
+
+def _finite(observation) -> bool:
+    if isinstance(observation, dict):
+        return all(np.isfinite(value).all() for value in observation.values())
+    return bool(np.isfinite(observation).all())
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_fuzzed_reset_options_and_actions_give_a_named_error_or_finite_results(envs, env_id):
+    """Random types, shapes, NaN/inf and out-of-range values for every reset option and for the action: either a
+    ValueError/TypeError that names the option (or says "action"), or finite observations and rewards."""
+    env, rng = envs[env_id], np.random.default_rng(7)
+    accepted = refused = 0
+    for trial in range(60):
+        name = OPTIONS[env_id][int(rng.integers(len(OPTIONS[env_id])))]
+        value = _random_value(rng)
+        try:
+            observation, _ = env.reset(seed=trial, options={name: value})
+        except (ValueError, TypeError) as error:
+            assert repr(name) in str(error) or "give either" in str(error), f"{name}={value!r}: {error}"
+            refused += 1
+            continue
+        accepted += 1
+        assert _finite(observation), f"{name}={value!r} gave a non-finite observation"
+        action = env.action_space.sample()
+        _, reward, *_ = env.step(action)
+        assert np.isfinite(reward), f"{name}={value!r} gave reward {reward}"
+    env.reset(seed=0)
+    for trial in range(20):
+        value = _random_value(rng)
+        try:
+            _, reward, *_ = env.step(value)
+        except ValueError as error:
+            assert "action" in str(error)
+            continue
+        assert np.isfinite(reward)
+    assert refused > 0 and accepted > 0
+
+
+def test_clops_envs_pickle_deep_copy_and_run_in_async_vector_envs():
+    """embreex's scene made ClopsNav envs unpicklable after reset, and async vector envs hung in their workers."""
+    import copy
+    import pickle
+
+    import gymnasium as gym
+
+    env = gym.make(CLOPS_ID, scene_seeds=(1000,))
+    env.reset(seed=0)
+    twins = [copy.deepcopy(env), pickle.loads(pickle.dumps(env))]
+    observation, reward, *_ = env.step(3)
+    for twin in twins:
+        again, twin_reward, *_ = twin.step(3)
+        assert np.array_equal(observation, again) and twin_reward == reward  # same process, same bodies: same bits
+    vector = gym.make_vec(CLOPS_ID, num_envs=2, vectorization_mode="async", scene_seeds=(1000,))
+    try:
+        views, _ = vector.reset(seed=0)
+        _, rewards, *_ = vector.step(np.array([0, 3]))
+        assert views.shape == (2, 5, 64, 64) and np.isfinite(rewards).all()
+    finally:
+        vector.close()
+
+
+def test_next_step_autoreset_works_under_gymnasiums_normalize_observation():
+    """Gymnasium's vector NormalizeObservation refused our vector envs (same-step autoreset only)."""
+    import gymnasium as gym
+    from gymnasium.wrappers.vector import NormalizeObservation
+
+    vector = NormalizeObservation(gym.make_vec(GAMMA_ID, num_envs=2, vectorization_mode="vector_entry_point",
+                                               autoreset_mode="next_step", max_primitives=2))  # fmt: skip
+    vector.reset(seed=0)
+    zeros = np.zeros((2, 128), dtype=np.float32)
+    vector.step(zeros)
+    _, _, terminated, truncated, info = vector.step(zeros)
+    assert (terminated | truncated).all() and info["_is_success"].all() and "final_obs" not in info
+    observation, reward, terminated, truncated, _ = vector.step(zeros)  # the restart step: action ignored
+    assert (reward == 0).all() and not (terminated | truncated).any() and np.isfinite(observation).all()
+    assert vector.unwrapped.state.steps.tolist() == [0, 0]
+    with pytest.raises(ValueError, match="autoreset_mode"):
+        gym.make_vec(GAMMA_ID, num_envs=2, vectorization_mode="vector_entry_point", autoreset_mode="sometimes")
+
+
+def test_train_defaults_follow_the_env_and_mocap_dir_means_the_clips_folder(tmp_path):
+    """`train ppo --env WandrReach-v0` failed without `--reward default`; `train` wanted a cmu/ subfolder that
+    `data build` did not."""
+    from agents.train_ppo import PPOTrainConfig
+    from motion_envs.cli import _subsets, parser
+
+    assert PPOTrainConfig(env_id=WANDR_ID).reward == "default" and PPOTrainConfig().reward == "paper"
+    (tmp_path / "cmu").mkdir()
+    (tmp_path / "hdm05").mkdir()
+    with_cmu = parser().parse_args(["train", "wandr", "--mocap-dir", str(tmp_path), "--subset", "hdm05"])
+    assert _subsets(with_cmu) == ("cmu", "hdm05")
+    flat = tmp_path / "flat"
+    flat.mkdir()
+    assert _subsets(parser().parse_args(["train", "gamma", "--mocap-dir", str(flat)])) == ()  # the whole folder
+    assert _subsets(parser().parse_args(["data", "build", "--mocap-dir", str(tmp_path)])) == ()

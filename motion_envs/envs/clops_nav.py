@@ -138,8 +138,8 @@ def scene_seed_option(options: dict[str, Any], bodies: int) -> np.ndarray | None
     seeds = real_array(options["scene_seed"], "scene_seed")
     if seeds.ndim > 1 or (seeds.ndim == 1 and len(seeds) != bodies):
         raise ValueError(f"option 'scene_seed' must be one seed or one per body ({bodies}), got shape {seeds.shape}")
-    if (seeds != np.round(seeds)).any() or (seeds < 0).any():
-        raise ValueError(f"option 'scene_seed' must be non-negative integers, got {options['scene_seed']!r}")
+    if (seeds != np.round(seeds)).any() or (seeds < 0).any() or (seeds >= 2**32).any():
+        raise ValueError(f"option 'scene_seed' must be integers in [0, 2**32), got {options['scene_seed']!r}")
     return np.broadcast_to(seeds.astype(np.int64), (bodies,))
 
 

@@ -51,13 +51,14 @@ def check_actions(actions: Any, shape: tuple[int, ...], batch: int | None) -> np
         raise ValueError(f"action must be a regular array of numbers, got {actions!r}") from error
     if raw.dtype.kind not in "iuf":
         raise ValueError(f"action must hold real numbers, got {type(actions).__name__} of dtype {raw.dtype}: {actions!r}"[:300])
-    array = raw.astype(np.float32)
+    with np.errstate(over="ignore"):  # beyond float32's range becomes inf, refused below
+        array = raw.astype(np.float32)
     expected = tuple(shape) if batch is None else (batch, *shape)
     if array.shape != expected:
         raise ValueError(f"action must have shape {expected}, got {array.shape}")
     if not np.isfinite(array).all():
         bad = np.argwhere(~np.isfinite(array))[:5].tolist()
-        raise ValueError(f"action contains NaN or inf (first at indices {bad})")
+        raise ValueError(f"action contains NaN, inf or values beyond float32's range (first at indices {bad})")
     return array
 
 

@@ -269,3 +269,17 @@ def test_train_defaults_follow_the_env_and_mocap_dir_means_the_clips_folder(tmp_
     flat.mkdir()
     assert _subsets(parser().parse_args(["train", "gamma", "--mocap-dir", str(flat)])) == ()  # the whole folder
     assert _subsets(parser().parse_args(["data", "build", "--mocap-dir", str(tmp_path)])) == ()
+
+
+def test_broken_prior_checkpoints_name_the_file_and_never_suggest_unsafe_loading(tmp_path):
+    """A truncated checkpoint gave `OSError: [Errno 22] Invalid argument` without a file name, a garbage one torch's
+    advice to set weights_only=False."""
+    from motion_envs.priors.checkpoint import CheckpointError
+    from motion_envs.priors.train_wandr import load_wandr
+
+    whole = (WEIGHTS_DIR / "wandr.pt").read_bytes()
+    for name, content in (("truncated.pt", whole[: len(whole) // 2]), ("garbage.pt", b"garbage" * 100), ("empty.pt", b"")):
+        (tmp_path / name).write_bytes(content)
+        with pytest.raises(CheckpointError, match=f"{name}.*not a readable checkpoint") as error:
+            load_wandr(tmp_path / name)
+        assert "weights_only" not in str(error.value)

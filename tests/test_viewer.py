@@ -93,3 +93,34 @@ def test_browser_viewer_replays_a_rollout_with_the_body_on_the_canvas(tmp_path):
     assert pixels.std(axis=0).mean() > 5  # not a blank canvas
     wood = (pixels[:, 0] > pixels[:, 2] + 60) & (pixels[:, 0] > pixels[:, 1] + 20)  # mannequin-x's wood palette
     assert wood.sum() > 200
+
+
+def test_a_viewer_on_a_busy_port_reports_the_port_it_bound(tmp_path):
+    """viser moves to the next free port when the asked one is taken; `view` printed the asked one (the URL of
+    whatever server held it)."""
+    from motion_envs.viewer import RolloutViewer
+
+    recorder = RolloutRecorder(30.0, "sphere", 0.1)
+    recorder.add(torch.zeros(1, 3), torch.zeros(1, 3), torch.zeros(1, 21, 3), torch.ones(1, 3))
+    busy = socket.socket()
+    busy.bind(("127.0.0.1", 0))
+    busy.listen()
+    taken = busy.getsockname()[1]
+    try:
+        viewer = RolloutViewer(recorder.rollout(), port=taken)
+        try:
+            assert viewer.url.startswith("http://127.0.0.1:") and viewer.url != f"http://127.0.0.1:{taken}"
+            assert int(viewer.url.rsplit(":", 1)[1]) == viewer.server.get_port()
+        finally:
+            viewer.stop()
+    finally:
+        busy.close()
+
+
+def test_view_help_lists_every_env():
+    import subprocess
+    import sys
+
+    text = subprocess.run([sys.executable, "-m", "motion_envs.cli", "view", "--help"], capture_output=True, text=True,
+                          timeout=60, check=True).stdout  # fmt: skip
+    assert all(name in " ".join(text.split()) for name in ("GammaReach-v0", "WandrReach-v0", "ClopsNav-v0", "--env-option"))

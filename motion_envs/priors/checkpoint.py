@@ -10,7 +10,11 @@ import torch
 from motion_envs.atomic import atomic_write
 
 
-class CheckpointMismatchError(ValueError):
+class CheckpointError(ValueError):
+    """A file that is not a readable checkpoint."""
+
+
+class CheckpointMismatchError(CheckpointError):
     """A checkpoint made for another model or architecture."""
 
 
@@ -24,12 +28,19 @@ def load_checkpoint(path: str | Path, kind: str, config: dict[str, Any] | None =
 
     Raises:
         FileNotFoundError: no such file.
+        CheckpointError: not a readable checkpoint (truncated, garbage, or holding objects beyond tensors and
+            plain containers, which are never unpickled), with the file named.
         CheckpointMismatchError: its `kind` or `config` differ from the expected ones.
     """
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"no checkpoint at {path}")
-    payload = torch.load(path, map_location="cpu", weights_only=True)
+    try:
+        payload = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as error:  # torch raises OSError, RuntimeError, UnpicklingError, EOFError ... for broken files
+        # torch's own text advises weights_only=False, which would run arbitrary code from the file: not repeated
+        raise CheckpointError(f"{path} ({path.stat().st_size:,} bytes) is not a readable checkpoint: truncated, corrupt "
+                              f"or not written by motion_envs ({type(error).__name__})") from error  # fmt: skip
     if not isinstance(payload, dict) or payload.get("kind") != kind:
         found = payload.get("kind") if isinstance(payload, dict) else type(payload).__name__
         raise CheckpointMismatchError(f"{path} holds a {found!r} checkpoint, expected {kind!r}")

@@ -5,6 +5,7 @@ The one change: training lengths are shrunk (`shrink_training`, the switch READM
 
 from __future__ import annotations
 
+import os
 import re
 import subprocess
 import sys
@@ -44,5 +45,8 @@ def test_readme_has_the_snippets_it_should():
 def test_readme_snippet_runs_verbatim_from_another_folder(line, code, tmp_path):
     script = tmp_path / "snippet.py"
     script.write_text(shrink_training(code))
-    result = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    # one torch thread: beside the other pytest worker, two threads each made SB3's 2,048 single-body steps 20x slower
+    environment = {**os.environ, "OMP_NUM_THREADS": "1"}
+    result = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True, text=True, timeout=600,
+                            env=environment)  # fmt: skip
     assert result.returncode == 0, f"README.md snippet at line {line} failed:\n{result.stderr[-3000:]}"

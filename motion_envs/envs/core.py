@@ -58,7 +58,7 @@ def check_actions(actions: Any, shape: tuple[int, ...], batch: int | None) -> np
         raise ValueError(f"action must have shape {expected}, got {array.shape}")
     if not np.isfinite(array).all():
         bad = np.argwhere(~np.isfinite(array))[:5].tolist()
-        raise ValueError(f"action contains NaN, inf or values beyond float32's range (first at indices {bad})")
+        raise ValueError(f"action contains NaN or inf, or values beyond float32's range (first at indices {bad})")
     return array
 
 

@@ -171,3 +171,17 @@ def test_batch_dimensions_are_kept(body):
     assert body.skin(pose, marker_ids()).shape == (2, 5, 67, 3)
     single = body(torch.zeros(3), torch.zeros(3), torch.zeros(21, 3))
     assert single.joints.shape == (22, 3)
+
+
+def test_sixd_gram_schmidt_matches_roma_and_has_gradients(generator):
+    from motion_envs.body.rotations import matrix_to_sixd, sixd_to_matrix
+
+    rotations = roma.random_rotmat(1000, generator=generator)
+    noisy = matrix_to_sixd(rotations) + 0.05 * torch.randn(1000, 6, generator=generator)  # not orthonormal
+    expected = roma.special_gramschmidt(noisy.reshape(-1, 2, 3).transpose(-1, -2))
+    ours = sixd_to_matrix(noisy.reshape(10, 100, 6))
+    assert ours.shape == (10, 100, 3, 3) and torch.allclose(ours.reshape(-1, 3, 3), expected, atol=1e-6)
+    assert torch.allclose(sixd_to_matrix(matrix_to_sixd(rotations)), rotations, atol=1e-6)
+    sixd = noisy[:4].clone().requires_grad_(True)
+    sixd_to_matrix(sixd).sum().backward()
+    assert torch.isfinite(sixd.grad).all() and sixd.grad.abs().sum() > 0

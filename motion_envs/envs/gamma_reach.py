@@ -248,7 +248,7 @@ class GammaReachCore:
         reached = closest <= config.goal_radius
         slowest = marker_speeds(primitive.markers, GAMMA_FPS, weights.central_difference).amin(dim=(1, 2))
         with torch.no_grad():
-            latent_mean, _ = self.generator.pose_vae.encode(primitive.body_pose[:, 2:])  # frames new to every body
+            latent_mean = self.generator.pose_latent(primitive.body_pose[:, 2:])  # frames new to every body
         terms = {
             "path": path_reward(pelvis_start, pelvis_end, goal),
             "orientation": orientation_reward(joints[:, -1], goal),

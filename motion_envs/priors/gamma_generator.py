@@ -7,8 +7,9 @@ and N latent codes and, batched over bodies:
 2. predicts the rest of the 10-frame primitive with the 1-frame model for
    bodies with a one-frame seed (episode starts) and the 2-frame model for
    the others;
-3. regresses a body for every predicted frame and skins its markers
-   (the re-projection);
+3. regresses a body for every predicted (new) frame and skins its markers
+   (the re-projection); the seed frames keep the seed's own bodies and
+   markers, so nothing is regressed or skinned twice;
 4. blends: the primitive's markers are the average of predicted and
    re-projected markers (the paper's "ours-ro", release factor 0.5), so a
    body never drifts more than half the prediction error from its markers;
@@ -17,15 +18,18 @@ and N latent codes and, batched over bodies:
 Seed frames are part of every primitive (frames 0..S-1), so a primitive always
 has 10 frames; the 10 - S after the seed are new.
 
-`precision="bfloat16"` runs the two networks (predictor and regressor, ~95% of
-the FLOPs) under bf16 autocast and returns their outputs in fp32; the body
-model, canonical frames and blending stay fp32, so positions do not lose
-bf16's 3 significant digits far from the origin. Recent x86 CPUs (AMX,
-AVX512-BF16) multiply bf16 matrices several times faster than fp32.
+`precision="bfloat16"` runs the networks (predictor, regressor and the pose
+VAE of the pose-prior reward, ~95% of the FLOPs) as bf16 copies and returns
+their outputs in fp32; the body model, canonical frames and blending stay
+fp32, so positions do not lose bf16's 3 significant digits far from the
+origin. Recent x86 CPUs (AMX, AVX512-BF16) multiply bf16 matrices several
+times faster than fp32; `motion_envs.precision` picks bf16 only where the CPU
+has it natively.
 """
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 from pathlib import Path
 
@@ -36,7 +40,7 @@ from motion_envs.body import BodyModel
 from motion_envs.body.markers import marker_ids
 from motion_envs.body.rotations import matrix_to_sixd, rotation_matrix
 from motion_envs.data.primitives import PRIMITIVE_FRAMES
-from motion_envs.priors.canonical import canonical_frame, goal_observation, to_canonical, to_world
+from motion_envs.priors.canonical import CanonicalFrame, canonical_frame, goal_observation, to_canonical, to_world
 from motion_envs.priors.gamma import MarkerCVAE, PoseVAE, goal_conditioned_seed
 from motion_envs.priors.train_gamma import load_predictor
 from motion_envs.priors.train_pose_prior import load_pose_vae
@@ -72,8 +76,8 @@ class Primitive:
     """One generated primitive of N bodies, world coordinates, 10 frames.
 
     markers: (N, 10, 67, 3) blended markers. predicted_markers: same, before
-    blending (seed frames: the seed's). reprojected_markers: same, skinned
-    from the regressed bodies. joints: (N, 10, 22, 3). transl: (N, 10, 3).
+    blending. reprojected_markers: same, skinned from the regressed bodies.
+    Seed frames (`~new_frames()`) hold the seed's markers in all three. joints: (N, 10, 22, 3). transl: (N, 10, 3).
     global_orient: (N, 10, 6). body_pose: (N, 10, 21, 6). seed_frames: (N,).
     """
 
@@ -109,6 +113,7 @@ class GammaGenerator(torch.nn.Module):
         self.requires_grad_(False)
         self.eval()
         self.precision = "float32"
+        self._copies: dict[tuple[str, torch.device], torch.nn.Module] = {}
 
     def set_precision(self, precision: str) -> GammaGenerator:
         """"float32" (default) or "bfloat16" for the networks (see the module doc); returns self."""
@@ -117,9 +122,22 @@ class GammaGenerator(torch.nn.Module):
         self.precision = precision
         return self
 
-    def _networks(self):
-        """Autocast context for the predictor and regressor passes."""
-        return torch.autocast(self.device.type, dtype=torch.bfloat16, enabled=self.precision == "bfloat16")
+    def _network(self, name: str) -> torch.nn.Module:
+        """The network `name` at the current precision: itself in fp32; in bf16 a bf16 copy made once per device.
+        Not autocast: it casts every weight again at every call when the weights need no gradient (ours), 278
+        casts and ~10 ms of a 1,024-body bf16 step."""
+        network = getattr(self, name)
+        if self.precision == "float32":
+            return network
+        key = (name, self.device)
+        if key not in self._copies:
+            self._copies[key] = copy.deepcopy(network).to(PRECISIONS[self.precision])
+        return self._copies[key]
+
+    def pose_latent(self, body_pose: torch.Tensor) -> torch.Tensor:
+        """(..., 21, 6) poses -> (..., latent) the pose VAE's mean (the pose-prior reward's input), in fp32."""
+        dtype = PRECISIONS[self.precision]
+        return self._network("pose_vae").encode(body_pose.to(dtype))[0].float()
 
     @classmethod
     def load(cls, weights_dir: str | Path = WEIGHTS_DIR) -> GammaGenerator:
@@ -163,54 +181,65 @@ class GammaGenerator(torch.nn.Module):
         by a goal-conditioned predictor (the g-CVAE baseline)."""
         count = len(z)
         bodies = torch.arange(count, device=z.device)
-        one = seed.seed_frames == 1
         first = seed.joints[bodies, 2 - seed.seed_frames]  # (N, 22, 3) first seed frame
         frame = canonical_frame(first)
-        seed_markers = to_canonical(seed.markers.flatten(1, 2), frame).unflatten(1, (2, -1))  # (N, 2, 67, 3)
-
-        predicted = torch.empty(count, PRIMITIVE_FRAMES, *seed_markers.shape[2:], dtype=z.dtype, device=z.device)
-        for mask, model, frames in ((one, self.predictor_1f, 1), (~one, self.predictor_2f, 2)):
-            if mask.any():  # two batched groups, not a loop over bodies
-                group_seed = seed_markers[mask][:, 2 - frames :]
-                condition = group_seed.flatten(2)
-                if model.config.goal_features:
-                    if goal is None:
-                        raise ValueError("a goal-conditioned predictor needs the bodies' goals")
-                    state = goal_observation(seed.markers[mask], first[mask], goal[mask])
-                    condition = goal_conditioned_seed(state)[:, 2 - frames :]
-                with self._networks():
-                    future = model.decode(condition, z[mask]).float().unflatten(-1, (-1, 3))
-                predicted[mask] = torch.cat([group_seed, future], dim=1)
-        # frames 0 and 1 of a 2-frame seed, and frame 0 of a 1-frame seed, are the seed itself
-        seed_slot = torch.stack([2 - seed.seed_frames, torch.ones_like(seed.seed_frames)], dim=1)  # (N, 2)
-
-        with self._networks():
-            regressed = {name: value.float() for name, value in self.regressor(predicted[:, 1:]).items()}  # frames 1..9
-        rotation = frame.rotation[:, None]
-        transl = to_world(regressed["transl"], frame)
-        orient = matrix_to_sixd(rotation @ rotation_matrix(regressed["global_orient"]))
-        pose = regressed["body_pose"]
-
-        def with_seed(new: torch.Tensor, seed_value: torch.Tensor) -> torch.Tensor:
-            """(N, 9, ...) regressed frames 1..9 + seed frames -> (N, 10, ...), seed where it is one."""
-            gathered = seed_value[bodies[:, None], seed_slot]  # (N, 2, ...) seed frames in order
-            full = torch.cat([gathered[:, :1], new], dim=1)
-            keep = (torch.arange(PRIMITIVE_FRAMES, device=z.device) < seed.seed_frames[:, None]).reshape(
-                count, PRIMITIVE_FRAMES, *([1] * (new.ndim - 2))
-            )
-            full[:, 1:2] = torch.where(keep[:, 1:2], gathered[:, 1:2], full[:, 1:2])
-            return full
-
-        transl, orient, pose = with_seed(transl, seed.transl), with_seed(orient, seed.global_orient), with_seed(pose, seed.body_pose)
-        joints, reprojected = self.markers_of(transl, orient, pose)
-        predicted_world = to_world(predicted.flatten(1, 2), frame).unflatten(1, (PRIMITIVE_FRAMES, -1))
-        predicted_world = with_seed(predicted_world[:, 1:], seed.markers)
-        blended = (1.0 - BLEND_FACTOR) * predicted_world + BLEND_FACTOR * reprojected
-        is_seed = (torch.arange(PRIMITIVE_FRAMES, device=z.device) < seed.seed_frames[:, None])[..., None, None]
-        markers = torch.where(is_seed, predicted_world, blended)  # seed frames were blended last primitive
-        primitive = Primitive(markers, predicted_world, reprojected, joints, transl, orient, pose, seed.seed_frames)
+        seed_slot = torch.stack([2 - seed.seed_frames, torch.ones_like(seed.seed_frames)], dim=1)  # (N, 2) in order
+        parts = []
+        for frames, model in ((1, "predictor_1f"), (2, "predictor_2f")):
+            rows = torch.nonzero(seed.seed_frames == frames).flatten()
+            if len(rows):  # two batched groups, not a loop over bodies
+                group_frame = CanonicalFrame(frame.origin[rows], frame.rotation[rows])
+                parts.append((rows, self._group(seed, rows, seed_slot[rows, 2 - frames :], group_frame, model, z[rows],
+                                                None if goal is None else goal[rows], first[rows])))  # fmt: skip
+        fields = _merge(parts, count)
+        primitive = Primitive(**fields, seed_frames=seed.seed_frames)
         next_seed = GammaSeed(
-            torch.full_like(seed.seed_frames, 2),
-            markers[:, -2:], joints[:, -2:], transl[:, -2:], orient[:, -2:], pose[:, -2:],
+            torch.full_like(seed.seed_frames, 2), primitive.markers[:, -2:], primitive.joints[:, -2:],
+            primitive.transl[:, -2:], primitive.global_orient[:, -2:], primitive.body_pose[:, -2:],
         )  # fmt: skip
         return primitive, next_seed
+
+    def _group(self, seed: GammaSeed, rows: torch.Tensor, slots: torch.Tensor, frame: CanonicalFrame, model: str,
+               z: torch.Tensor, goal: torch.Tensor | None, first: torch.Tensor) -> dict[str, torch.Tensor]:  # fmt: skip
+        """The primitive of the M bodies `rows` whose seeds have S = `slots.shape[1]` frames (their slots in the
+        seed: (M, S)): the 10 - S new frames predicted, regressed to bodies and re-projected (only those: the S seed
+        frames are the seed's own bodies and markers), then the seed frames put in front. Returns `Primitive`'s
+        fields, (M, 10, ...) each."""
+        frames = slots.shape[1]
+        seed_world = {name: getattr(seed, name)[rows[:, None], slots] for name in SEED_FIELDS}  # (M, S, ...)
+        group_seed = to_canonical(seed_world["markers"].flatten(1, 2), frame).unflatten(1, (frames, -1))  # (M, S, 67, 3)
+        condition = group_seed.flatten(2)
+        if getattr(self, model).config.goal_features:
+            if goal is None:
+                raise ValueError("a goal-conditioned predictor needs the bodies' goals")
+            state = goal_observation(seed.markers[rows], first, goal)
+            condition = goal_conditioned_seed(state)[:, 2 - frames :]
+        dtype = PRECISIONS[self.precision]
+        future = self._network(model).decode(condition.to(dtype), z.to(dtype)).unflatten(-1, (-1, 3))  # (M, 10 - S, 67, 3)
+        regressed = {name: value.float() for name, value in self._network("regressor")(future).items()}
+        future = future.float()  # canonical coordinates
+        transl = to_world(regressed["transl"], frame)
+        orient = matrix_to_sixd(frame.rotation[:, None] @ rotation_matrix(regressed["global_orient"]))
+        pose = regressed["body_pose"]
+        joints, reprojected = self.markers_of(transl, orient, pose)
+        predicted = to_world(future.flatten(1, 2), frame).unflatten(1, (-1, future.shape[2]))
+        blended = torch.lerp(predicted, reprojected, BLEND_FACTOR)  # (1 − f) predicted + f re-projected
+        new = {"markers": blended, "predicted_markers": predicted, "reprojected_markers": reprojected, "joints": joints,
+               "transl": transl, "global_orient": orient, "body_pose": pose}  # fmt: skip
+        seed_of = {"predicted_markers": "markers", "reprojected_markers": "markers"}
+        return {name: torch.cat([seed_world[seed_of.get(name, name)], value], dim=1) for name, value in new.items()}
+
+
+SEED_FIELDS = ("markers", "joints", "transl", "global_orient", "body_pose")
+
+
+def _merge(parts: list[tuple[torch.Tensor, dict[str, torch.Tensor]]], count: int) -> dict[str, torch.Tensor]:
+    """Per-group fields (rows (M,), {name: (M, ...)}) -> {name: (count, ...)}, each body's row from its group."""
+    if len(parts) == 1:
+        return parts[0][1]  # one group holds every body, in order
+    merged = {}
+    for name, value in parts[0][1].items():
+        merged[name] = value.new_empty((count, *value.shape[1:]))
+        for rows, fields in parts:
+            merged[name][rows] = fields[name]
+    return merged

@@ -20,7 +20,7 @@ and contact score and FS are those of the chosen branch, replayed.
 Rows: random z, the g-CVAE (`baselines.g_cvae`, z ~ N(0, I)), each shipped
 GammaReach policy (sampled latents, as the paper), the α = 10 and α = 1
 paper-reward policies with top-1 and top-4 search (the release's node cost
-and distance alone), random z with top-4 search, and with `--bf16` the
+and distance alone), random z with top-4 search, and with `--bf16` (or when the CPU has native bf16) the
 α = 10 policy with the prior's networks in bf16 (`GammaGenerator.set_precision`).
 `--quick` (the README's main job) runs fewer pairs and clones. Writes
 `benchmarks/results/gamma_control.md` (or `gamma_control_quick.md`) and a
@@ -49,7 +49,6 @@ from motion_envs.data.primitives import GAMMA_FPS
 from motion_envs.envs.gamma_reach import GammaReachConfig, GammaReachCore, GammaReachState, GammaStepResult
 from motion_envs.metrics import foot_skating, skating_threshold
 from motion_envs.priors.canonical import PELVIS
-from motion_envs.priors.gamma_generator import GammaGenerator
 from motion_envs.priors.training import WEIGHTS_DIR
 from motion_envs.wrappers.tree_search import SearchCost, SearchSettings, beam_search
 
@@ -201,16 +200,18 @@ def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False,
         "0.1 × orientation + 0.1 × distance) or distance alone (`SearchCost.distance_only`). Policies sample their latents.",
         "", *table(rows, seconds, PAPER_ROWS),
     ]  # fmt: skip
-    if bf16 and searcher is not None:
+    lines += ["", f"The prior's networks ran in {core.generator.precision} (`precision=\"auto\"`: bf16 only on a CPU with "
+              "native bf16, `motion_envs.precision`)."]  # fmt: skip
+    if (bf16 or core.generator.precision == "bfloat16") and searcher is not None:
         check_pairs, check_clones = BF16_CHECK
         subset = start.index(torch.arange(min(check_pairs, pairs)))
-        bf16_core = GammaReachCore(GammaReachConfig(), GammaGenerator.load().set_precision("bfloat16"))
+        cores = {name: GammaReachCore(GammaReachConfig(precision=name)) for name in ("float32", "bfloat16")}
         checks, check_seconds = timed_rows({
-            "policy(10), fp32 prior": lambda: run_clones(core, subset, PolicyLatent(searcher, seed=seed), check_clones),
-            "policy(10), bf16 prior": lambda: run_clones(bf16_core, subset, PolicyLatent(searcher, seed=seed), check_clones),
+            f"policy(10), {name} prior": lambda name=name: run_clones(cores[name], subset, PolicyLatent(searcher, seed=seed), check_clones)
+            for name in cores
         })  # fmt: skip
         lines += ["", f"bf16 check: the first {subset.num_bodies} pairs × {check_clones} clones, the prior's networks in fp32 "
-                  "and in bf16 (`GammaGenerator.set_precision`), same policy and seed.", "", *table(checks, check_seconds)]  # fmt: skip
+                  "and in bf16 (`GammaReachConfig.precision`), same policy and seed.", "", *table(checks, check_seconds)]  # fmt: skip
     lines += ["", machine_line(), f"Command: `motion-envs bench gamma{' --quick' if quick else ''}{' --bf16' if bf16 else ''}`; "
               f"{time.perf_counter() - began:.0f} s in all.", "", f"![paths](gamma_control{name_suffix}.png)", ""]  # fmt: skip
     text = "\n".join(lines)

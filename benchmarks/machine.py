@@ -7,6 +7,11 @@ import platform
 
 import torch
 
+from motion_envs.precision import cpu_flags, native_bf16
+
+ISA_FLAGS = ("avx2", "fma", "avx512f", "avx512_bf16", "avx512_fp16", "amx_tile", "amx_bf16")
+"""The instruction-set flags that decide torch's CPU kernels (and whether bf16 is native), as /proc/cpuinfo names them."""
+
 
 def machine_line() -> str:
     """One Markdown line: CPU, cores, torch version and thread count."""
@@ -16,7 +21,9 @@ def machine_line() -> str:
             cpu = next(line.split(":", 1)[1].strip() for line in info if line.startswith("model name"))
     except (OSError, StopIteration):
         pass
+    flags = [flag for flag in ISA_FLAGS if flag in cpu_flags()]
+    native = "native bf16" if native_bf16() else "no native bf16 (emulated)"
     return (
-        f"Machine: {cpu}, {os.cpu_count()} cores; Python {platform.python_version()}; "
-        f"torch {torch.__version__}, {torch.get_num_threads()} threads."
+        f"Machine: {cpu}, {os.cpu_count()} cores; CPU flags {', '.join(flags) or 'none of ' + ', '.join(ISA_FLAGS)} "
+        f"({native}); Python {platform.python_version()}; torch {torch.__version__}, {torch.get_num_threads()} threads."
     )

@@ -18,13 +18,15 @@ def gamma() -> GammaGenerator:
 
 
 def test_adapter_matches_the_native_env_step_for_step(gamma):
-    venv = NativeVecEnv.make("motion_envs/GammaReach-v0", num_envs=3, generator=gamma)
+    """fp32 networks: in bf16 (auto on AMX / AVX512-BF16 CPUs) rounding differs between batch sizes by ~1e-3 after
+    two primitives, more than the 1e-4 this comparison of the adapter's bookkeeping asserts."""
+    venv = NativeVecEnv.make("motion_envs/GammaReach-v0", num_envs=3, generator=gamma, precision="float32")
     venv.seed(20)
     observations = venv.reset()
     actions = np.random.default_rng(0).standard_normal((2, 3, 128)).astype(np.float32)
     stepped = [venv.step(a) for a in actions]
     for i in range(3):
-        single = GammaReachEnv(generator=gamma)
+        single = GammaReachEnv(generator=gamma, precision="float32")
         observation, _ = single.reset(seed=20 + i)
         assert np.allclose(observation, observations[i], atol=1e-5)
         for a, (vec_obs, vec_rewards, vec_dones, _) in zip(actions, stepped):

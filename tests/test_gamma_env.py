@@ -212,3 +212,23 @@ def test_an_episodes_goal_reward_sums_to_the_papers(gamma):
         paid += info["reward_terms"]["goal"] + info["reward_terms"]["goal_settlement"]
     assert truncated
     assert paid == pytest.approx(4 * info["reward_terms"]["goal"], rel=1e-5)  # T · r_goal(closest of the episode)
+
+
+def test_bf16_is_chosen_only_where_the_cpu_has_it_and_agrees_with_fp32(gamma, monkeypatch):
+    from motion_envs import precision
+
+    monkeypatch.setattr(precision, "cpu_flags", lambda: frozenset({"avx2", "fma"}))  # an AVX2-only EPYC
+    assert GammaReachEnv(generator=gamma).core.generator.precision == "float32"
+    assert GammaReachEnv(generator=gamma, precision="bfloat16").core.generator.precision == "bfloat16"  # explicit wins
+    monkeypatch.setattr(precision, "cpu_flags", lambda: frozenset({"avx2", "avx512f", "avx512_bf16", "amx_bf16"}))
+    assert GammaReachEnv(generator=gamma).core.generator.precision == "bfloat16"
+    assert GammaReachEnv(generator=gamma, precision="float32").core.generator.precision == "float32"
+    with pytest.raises(ValueError, match="precision"):
+        GammaReachEnv(generator=gamma, precision="fp8")
+    pelvis = {}
+    for name in ("float32", "bfloat16"):  # one primitive from the same start: bf16's 3 digits move it by millimetres
+        env = GammaReachEnv(generator=gamma, precision=name)
+        env.reset(seed=3)
+        env.step(_latents(1, 5)[0])
+        pelvis[name] = env.state.seed.joints[0, -1, 0]
+    assert 0 < (pelvis["float32"] - pelvis["bfloat16"]).norm() < 0.02

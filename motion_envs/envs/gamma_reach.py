@@ -82,6 +82,7 @@ from motion_envs.data.start_poses import load_start_poses
 from motion_envs.envs.core import CoreVectorEnv, check_actions, config_from_kwargs
 from motion_envs.envs.options import check_known, index, number, point
 from motion_envs.metrics import contact_score, marker_speeds
+from motion_envs.precision import PRECISIONS, resolve_precision
 from motion_envs.priors.canonical import PELVIS, goal_observation
 from motion_envs.priors.gamma_generator import GammaGenerator, GammaSeed, Primitive
 from motion_envs.render.env_view import EnvView, RenderInputs
@@ -117,10 +118,15 @@ class GammaReachConfig:
     weights_dir: str | None = None
     """Folder with the GAMMA weights (default: the shipped ones)."""
     device: str = "cpu"
+    precision: str = "auto"
+    """The prior's networks: "float32", "bfloat16", or "auto": bf16 where the device multiplies it natively
+    (`motion_envs.precision`; AMX / AVX512-BF16 CPUs, bf16 GPUs), else fp32. The core sets its generator's."""
 
     def __post_init__(self) -> None:
         if isinstance(self.reward, str):
             object.__setattr__(self, "reward", RewardConfig.named(self.reward))
+        if self.precision not in PRECISIONS:
+            raise ValueError(f"precision must be one of {PRECISIONS}, got {self.precision!r}")
         if self.start_kind not in START_KINDS:
             raise ValueError(f"start_kind must be one of {START_KINDS}, got {self.start_kind!r}")
         if self.max_primitives < 1 or self.area <= 0 or self.goal_radius <= 0 or self.latent_bound <= 0:
@@ -160,7 +166,7 @@ class GammaReachCore:
         self.config = config
         self.device = torch.device(config.device)
         loaded = generator or (GammaGenerator.load(config.weights_dir) if config.weights_dir else GammaGenerator.load())
-        self.generator = loaded.to(self.device)
+        self.generator = loaded.to(self.device).set_precision(resolve_precision(config.precision, self.device))
         starts = load_start_poses(GAMMA_FPS)
         keep = np.ones(len(starts["kind"]), dtype=bool) if config.start_kind == "any" else starts["kind"] == config.start_kind
         self.start_rows = np.flatnonzero(keep)

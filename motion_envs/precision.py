@@ -1,0 +1,59 @@
+"""Which float precision the priors' networks run in: bf16 only where the hardware multiplies bf16 natively.
+
+On a CPU that means the AMX or AVX512-BF16 instructions (Intel Sapphire Rapids and later, AMD Zen 4 and later);
+without them torch emulates bf16 matrix products in software, 7x slower than fp32 on an AVX2-only EPYC (GAMMA
+rollout, 1,024 bodies: 278 against 1,987 body-primitives/s). On CUDA it is `torch.cuda.is_bf16_supported()`.
+An explicit precision ("float32" or "bfloat16") always wins over "auto".
+"""
+
+from __future__ import annotations
+
+import functools
+from pathlib import Path
+
+import torch
+
+PRECISIONS = ("auto", "float32", "bfloat16")
+NATIVE_BF16_FLAGS = ("amx_bf16", "avx512_bf16")
+"""CPU flags (as /proc/cpuinfo names them) of native bf16 matrix arithmetic."""
+
+
+@functools.cache
+def cpu_flags() -> frozenset[str]:
+    """The flags of this machine's first CPU in /proc/cpuinfo (empty where there is none, e.g. macOS)."""
+    info = Path("/proc/cpuinfo")
+    if not info.is_file():
+        return frozenset()
+    for line in info.read_text(errors="replace").splitlines():
+        if line.startswith(("flags", "Features")):
+            return frozenset(line.split(":", 1)[1].split())
+    return frozenset()
+
+
+def cpu_model() -> str:
+    """The CPU's model name from /proc/cpuinfo ('' where there is none)."""
+    info = Path("/proc/cpuinfo")
+    if info.is_file():
+        for line in info.read_text(errors="replace").splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    return ""
+
+
+def native_bf16(device: str | torch.device = "cpu", flags: frozenset[str] | None = None) -> bool:
+    """Whether `device` multiplies bf16 matrices natively (`flags`: the CPU flags to judge, default this CPU's)."""
+    device = torch.device(device)
+    if device.type == "cuda":
+        return torch.cuda.is_available() and torch.cuda.is_bf16_supported()
+    if device.type != "cpu":
+        return False
+    return any(flag in (cpu_flags() if flags is None else flags) for flag in NATIVE_BF16_FLAGS)
+
+
+def resolve_precision(precision: str, device: str | torch.device = "cpu") -> str:
+    """"float32" or "bfloat16": `precision` itself, or for "auto" bf16 where `native_bf16(device)`, else fp32."""
+    if precision not in PRECISIONS:
+        raise ValueError(f"precision must be one of {PRECISIONS}, got {precision!r}")
+    if precision != "auto":
+        return precision
+    return "bfloat16" if native_bf16(device) else "float32"

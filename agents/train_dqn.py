@@ -62,6 +62,8 @@ class DQNTrainConfig:
     beta_start: float = 0.4
     checkpoint_minutes: float = 3.0
     seed: int = 0
+    device: str = "cpu"
+    """Where the Q-network and the env's prior run ("cuda" on a GPU machine; the views are ray-cast on the CPU)."""
     run_dir: Path = Path("runs/dqn")
     weights: Path | None = None
     ship: bool = False
@@ -83,7 +85,7 @@ def make_model(config: DQNTrainConfig, venv: VecMonitor) -> PrioritizedDoubleDQN
         learning_starts=config.learning_starts, batch_size=config.batch_size, learning_rate=config.learning_rate,
         gamma=config.gamma, train_freq=1, gradient_steps=config.gradient_steps,
         target_update_interval=config.target_update_interval, exploration_fraction=config.exploration_fraction,
-        exploration_final_eps=config.exploration_final_eps, seed=config.seed, device="cpu",
+        exploration_final_eps=config.exploration_final_eps, seed=config.seed, device=config.device,
         tensorboard_log=str(config.run_dir / "tensorboard"),
     )  # fmt: skip
 
@@ -93,13 +95,13 @@ def train_dqn(config: DQNTrainConfig) -> dict:
     config.run_dir.mkdir(parents=True, exist_ok=True)
     torch.manual_seed(config.seed)
     venv = VecMonitor(NativeVecEnv.make(config.env_id, num_envs=config.num_envs, family=config.family,
-                                        known_goal=config.known_goal, goal_memory=config.goal_memory,
+                                        known_goal=config.known_goal, goal_memory=config.goal_memory, device=config.device,
                                         **config.env_kwargs))  # fmt: skip
     venv.seed(config.seed)
     checkpoint, curve_path = config.run_dir / "model.zip", config.run_dir / "curve.json"
     curve = json.loads(curve_path.read_text()) if curve_path.exists() else []
     if checkpoint.exists():
-        model = PrioritizedDoubleDQN.load(checkpoint, env=venv, device="cpu")
+        model = PrioritizedDoubleDQN.load(checkpoint, env=venv, device=config.device)
         model.learning_starts = model.num_timesteps + config.learning_starts  # refill the (unsaved) buffer first
         print(f"resuming {checkpoint} at {model.num_timesteps} steps", file=sys.stderr)
     else:

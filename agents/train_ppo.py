@@ -80,6 +80,8 @@ class PPOTrainConfig:
     Monte-Carlo returns, runs went 0.23 -> 0.51 -> 0.09 over 230k steps); "last": the final one."""
     checkpoint_minutes: float = 3.0
     seed: int = 0
+    device: str = "cpu"
+    """Where the policy and the env's prior run ("cuda" on a GPU machine)."""
     run_dir: Path = Path("runs/ppo")
     weights: Path | None = None
     ship: bool = False
@@ -148,7 +150,7 @@ def train_ppo(config: PPOTrainConfig, clone_from: GoalWindows | None = None) -> 
         raise ValueError("init='data' needs goal windows from the data (clone_from); pass init='scratch' to skip")
     config.run_dir.mkdir(parents=True, exist_ok=True)
     torch.manual_seed(config.seed)
-    venv = VecMonitor(NativeVecEnv.make(config.env_id, num_envs=config.num_envs, reward=config.reward,
+    venv = VecMonitor(NativeVecEnv.make(config.env_id, num_envs=config.num_envs, reward=config.reward, device=config.device,
                                         bootstrap_truncation=config.bootstrap_truncation, **config.env_kwargs))  # fmt: skip
     venv.seed(config.seed)
     statistics = config.run_dir / "vecnormalize.pkl"
@@ -161,10 +163,10 @@ def train_ppo(config: PPOTrainConfig, clone_from: GoalWindows | None = None) -> 
     curve_path = config.run_dir / "curve.json"
     curve = json.loads(curve_path.read_text()) if curve_path.exists() else []
     if checkpoint.exists():
-        model = PPOKL.load(checkpoint, env=venv, device="cpu")
+        model = PPOKL.load(checkpoint, env=venv, device=config.device)
         print(f"resuming {checkpoint} at {model.num_timesteps} steps", file=sys.stderr)
     elif config.init not in ("data", "scratch"):
-        model = PPOKL.load(config.init, env=venv, device="cpu", tensorboard_log=str(config.run_dir / "tensorboard"),
+        model = PPOKL.load(config.init, env=venv, device=config.device, tensorboard_log=str(config.run_dir / "tensorboard"),
                            learning_rate=config.learning_rate, kl_prior_coef=config.alpha, n_steps=config.n_steps,
                            batch_size=config.batch_size, n_epochs=config.n_epochs)  # this run's settings; fmt: skip
         model.num_timesteps = 0  # this run's steps, from the loaded policy
@@ -172,7 +174,7 @@ def train_ppo(config: PPOTrainConfig, clone_from: GoalWindows | None = None) -> 
         width = config.net_width
         model = PPOKL("MlpPolicy", venv, kl_prior_coef=config.alpha, anchor_coef=config.anchor, n_steps=config.n_steps,
                       batch_size=config.batch_size, n_epochs=config.n_epochs, learning_rate=config.learning_rate,
-                      seed=config.seed, device="cpu",
+                      seed=config.seed, device=config.device,
                       tensorboard_log=str(config.run_dir / "tensorboard"),
                       policy_kwargs={"net_arch": {"pi": [width, width], "vf": [width, width]},
                                      "log_std_init": config.log_std_init})  # fmt: skip

@@ -168,11 +168,14 @@ def table(rows: dict[str, dict], seconds: dict[str, float], paper: dict[str, tup
     return lines
 
 
-def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False, bf16: bool = False) -> int:
+def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False, bf16: bool = False,
+         precision: str = "auto", output: str | None = None) -> int:  # fmt: skip
+    """`precision`: the prior's networks for the main table; `output`: the results' file stem (default
+    gamma_control[_quick])."""
     if quick:
         pairs, clones = 20, 8
     began = time.perf_counter()
-    core = GammaReachCore(GammaReachConfig())
+    core = GammaReachCore(GammaReachConfig(precision=precision))
     start = fixed_pairs(core, pairs, seed)
     runs: dict[str, Callable[[], dict]] = {"random z": lambda: run_clones(core, start, RandomLatent(seed), clones)}
     if G_CVAE_WEIGHTS.exists():
@@ -189,7 +192,7 @@ def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False,
     searcher = searchers.get("policy(10)")
     runs["random z & top4"] = lambda: run_search(core, start, RandomLatent(seed), SearchSettings(keep=4))
     rows, seconds = timed_rows(runs)
-    name_suffix = "_quick" if quick else ""
+    stem = output or "gamma_control" + ("_quick" if quick else "")
     lines = [
         f"# GAMMA goal reaching ({'quick: ' if quick else ''}{pairs} body-goal pairs × {clones} clones, up to 60 primitives)",
         "",
@@ -212,15 +215,16 @@ def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False,
         })  # fmt: skip
         lines += ["", f"bf16 check: the first {subset.num_bodies} pairs × {check_clones} clones, the prior's networks in fp32 "
                   "and in bf16 (`GammaReachConfig.precision`), same policy and seed.", "", *table(checks, check_seconds)]  # fmt: skip
-    lines += ["", machine_line(), f"Command: `motion-envs bench gamma{' --quick' if quick else ''}{' --bf16' if bf16 else ''}`; "
-              f"{time.perf_counter() - began:.0f} s in all.", "", f"![paths](gamma_control{name_suffix}.png)", ""]  # fmt: skip
+    lines += ["", machine_line(), f"Command: `motion-envs bench gamma{' --quick' if quick else ''}{' --bf16' if bf16 else ''}"
+              f"{'' if precision == 'auto' else ' --precision ' + precision}{' --output ' + output if output else ''}`; "
+              f"{time.perf_counter() - began:.0f} s in all.", "", f"![paths]({stem}.png)", ""]  # fmt: skip
     text = "\n".join(lines)
     print(text)
     RESULTS.mkdir(parents=True, exist_ok=True)
-    atomic_write(RESULTS / f"gamma_control{name_suffix}.md", lambda file: file.write(text.encode()))
+    atomic_write(RESULTS / f"{stem}.md", lambda file: file.write(text.encode()))
     figure, axes = grid_of_axes(len(rows))
     goals = start.goal[:, :2].numpy()
     for axis, (name, row) in zip(axes, rows.items()):
         top_down(axis, row["paths"], goals, title=f"{name}: {row['success rate']:.2f}", extent=10.0)  # NaN after a pair ends
-    save(figure, RESULTS / f"gamma_control{name_suffix}.png", dpi=80)
+    save(figure, RESULTS / f"{stem}.png", dpi=80)
     return 0

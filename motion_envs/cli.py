@@ -44,7 +44,8 @@ def _bench_data(args: argparse.Namespace) -> int:
 def _bench_gamma(args: argparse.Namespace) -> int:
     from benchmarks.gamma_control import main as gamma_control
 
-    return gamma_control(pairs=args.pairs, clones=args.clones, seed=args.seed, quick=args.quick, bf16=args.bf16)
+    return gamma_control(pairs=args.pairs, clones=args.clones, seed=args.seed, quick=args.quick, bf16=args.bf16,
+                         precision=args.precision, output=args.output)  # fmt: skip
 
 
 def _bench_clops(args: argparse.Namespace) -> int:
@@ -77,6 +78,12 @@ def _bench_speed(args: argparse.Namespace) -> int:
     from benchmarks.throughput import main as throughput
 
     return throughput()
+
+
+def _bench_gpu(args: argparse.Namespace) -> int:
+    from benchmarks.gpu_check import main as gpu_check
+
+    return gpu_check()
 
 
 def _bench_render(args: argparse.Namespace) -> int:
@@ -147,7 +154,7 @@ def _train_ppo(args: argparse.Namespace) -> int:
     given = {"env_id": args.env, "reward": args.reward, "alpha": args.alpha, "num_envs": args.num_envs,
              "total_timesteps": args.timesteps, "run_dir": args.run_dir, "weights": args.weights, "seed": args.seed,
              "init": args.init, "log_std_init": args.log_std_init, "learning_rate": args.learning_rate,
-             "n_steps": args.n_steps, "anchor": args.anchor, "ship": args.ship or None,
+             "n_steps": args.n_steps, "anchor": args.anchor, "ship": args.ship or None, "device": args.device,
              "env_kwargs": dict(_env_option(option) for option in args.env_option) or None}  # fmt: skip
     config = PPOTrainConfig(command="motion-envs " + " ".join(sys.argv[1:]),
                             **{name: value for name, value in given.items() if value is not None})  # fmt: skip
@@ -173,7 +180,7 @@ def _train_dqn(args: argparse.Namespace) -> int:
 
     given = {"family": args.family, "known_goal": args.known_goal or None, "goal_memory": args.goal_memory or None,
              "num_envs": args.num_envs, "total_timesteps": args.timesteps, "run_dir": args.run_dir, "weights": args.weights, "seed": args.seed,
-             "learning_rate": args.learning_rate, "batch_size": args.batch_size, "ship": args.ship or None,
+             "learning_rate": args.learning_rate, "batch_size": args.batch_size, "ship": args.ship or None, "device": args.device,
              "env_kwargs": dict(_env_option(option) for option in args.env_option) or None}  # fmt: skip
     config = DQNTrainConfig(command="motion-envs " + " ".join(sys.argv[1:]),
                             **{name: value for name, value in given.items() if value is not None})  # fmt: skip
@@ -436,6 +443,7 @@ def parser() -> argparse.ArgumentParser:
                        help="wandr: share of training goals drawn ≥ 1.5 m away (default 0.5; the release: 1)")
     train.add_argument("--prior-init", "--clops-init", dest="prior_init", default=None,
                        help="wandr, clops: prior weights to start from, or 'scratch' (default: wandr scratch, clops the shipped wandr.pt)")
+    train.add_argument("--device", default=None, help="ppo, dqn: where the policy and the prior run (default cpu; cuda)")
     train.add_argument("--seed", type=int, default=None)
     _add_data_args(train, ["cmu"])
     train.set_defaults(run=_train)
@@ -452,6 +460,9 @@ def parser() -> argparse.ArgumentParser:
     bench_gamma.add_argument("--clones", type=int, default=32)
     bench_gamma.add_argument("--bf16", action="store_true", help="add a row with the prior's networks in bf16")
     bench_gamma.add_argument("--seed", type=int, default=0)
+    bench_gamma.add_argument("--precision", default="auto", choices=("auto", "float32", "bfloat16"),
+                             help="the prior's networks (auto: bf16 where the CPU has it natively)")
+    bench_gamma.add_argument("--output", default=None, help="results file stem under benchmarks/results/ (default gamma_control[_quick])")
     bench_gamma.set_defaults(run=_bench_gamma)
     bench_wandr = bench.add_parser("wandr", help="WANDR goal reaching (the paper's 3,750-rollout grid) with the shipped weights")
     bench_wandr.add_argument("--quick", action="store_true", help="2 start poses x 1 sample (250 rollouts)")
@@ -473,6 +484,9 @@ def parser() -> argparse.ArgumentParser:
     bench_clops.set_defaults(run=_bench_clops)
     bench.add_parser("speed", help="GAMMA rollout body-primitives/s by batch, fp32 and bf16 (throughput.md)").set_defaults(
         run=_bench_speed
+    )
+    bench.add_parser("gpu", help="CUDA: CPU and GPU agree on the same latents; GPU throughput (skips without CUDA)").set_defaults(
+        run=_bench_gpu
     )
     bench.add_parser("render", help="third-person and egocentric rendering frames/s (benchmarks/results/throughput.md)").set_defaults(
         run=_bench_render

@@ -53,3 +53,26 @@ def test_rerun_rows_replace_their_lines_insert_new_ones_and_keep_the_rest(tmp_pa
                                 "| PPO (a) | 85 |\n| PPO (b) | 90 |\n| opt | 2 |\n| new | 1 |\n| data | |\n")  # fmt: skip
     with pytest.raises(FileNotFoundError, match="run the whole benchmark once"):
         replace_rows(tmp_path / "missing.md", {}, "| data", "")
+
+
+def test_bench_gpu_skips_cleanly_without_cuda(tmp_path):
+    import torch
+
+    if torch.cuda.is_available():
+        pytest.skip("a CUDA machine: `motion-envs bench gpu` measures here instead of skipping")
+    result = subprocess.run([sys.executable, "-m", "motion_envs.cli", "bench", "gpu"], capture_output=True, text=True,
+                            timeout=120, cwd=tmp_path)  # fmt: skip
+    assert result.returncode == 0 and "no CUDA device" in result.stdout and "Traceback" not in result.stderr
+
+
+def test_the_gpu_checks_rollouts_run_on_the_cpu():
+    """The CUDA agreement check's two rollouts, on the CPU here (what `bench gpu` compares with CUDA)."""
+    import torch
+
+    from benchmarks.gpu_check import rollout_positions, wandr_joints
+
+    gamma = rollout_positions("cpu", torch.randn(2, 3, 128, generator=torch.Generator().manual_seed(0)))
+    wandr = wandr_joints("cpu", torch.randn(4, 3, 64, generator=torch.Generator().manual_seed(0)))
+    assert gamma.shape == (2, 3, 10, 68, 3) and wandr.shape == (4, 3, 22, 3)
+    assert torch.isfinite(gamma).all() and torch.isfinite(wandr).all()
+    assert (gamma[1, :, -1, -1] - gamma[0, :, 0, -1]).norm(dim=-1).max() > 0  # the pelvis moved

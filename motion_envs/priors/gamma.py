@@ -204,8 +204,10 @@ class BodyRegressor(nn.Module):
             raise ValueError(f"markers must end in ({NUM_MARKERS}, 3), got {tuple(markers.shape)}")
         flat = markers.reshape(-1, MARKER_DIM)
         estimate = torch.zeros(flat.shape[0], BODY_DIM, dtype=flat.dtype, device=flat.device)
-        for _ in range(self.config.recursions):
-            estimate = estimate + self.net(torch.cat([flat, estimate], dim=-1))
+        entry, rest = self.net[0], self.net[1:]
+        from_markers = F.linear(flat, entry.weight[:, :MARKER_DIM], entry.bias)  # the same in every recursion: once
+        for _ in range(self.config.recursions):  # net([markers, estimate]), the first layer split by its inputs
+            estimate = estimate + rest(from_markers + F.linear(estimate, entry.weight[:, MARKER_DIM:]))
         batch = markers.shape[:-2]
         return {
             "transl": estimate[:, :3].reshape(*batch, 3),

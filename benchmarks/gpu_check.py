@@ -1,0 +1,106 @@
+"""CUDA check (`motion-envs bench gpu`): the GAMMA rollout on the GPU agrees with the CPU, and how fast it runs.
+
+1. Agreement: the same start bodies and the same latents (seeded on the CPU), stepped on the CPU and on CUDA in
+   fp32: GAMMA for `PRIMITIVES` = 20 primitives (every marker and pelvis of their 10-frame windows), WANDR for
+   `WANDR_FRAMES` = 240 frames (every joint). The largest distance must stay within `TOLERANCE_M` (1e-4 m). The
+   GPU's matmuls reassociate sums differently, so the two agree to float32 rounding, not bit for bit, and the
+   autoregressive rollouts let that grow; 1e-4 m is a tenth of a millimetre.
+2. Throughput: body-primitives/s at 1,024 to 16,384 bodies in fp32 and bf16 (`GammaReachConfig.precision`).
+
+Writes the "GAMMA on CUDA" section of `benchmarks/results/throughput.md`. Without CUDA it says so and returns 0
+without writing anything (`main` returns 0 so that `bench gpu` on a laptop is not an error).
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from benchmarks.machine import machine_line
+from benchmarks.sections import replace_section
+from motion_envs.envs.gamma_reach import GammaReachConfig, GammaReachCore
+
+RESULTS = Path(__file__).resolve().parent / "results"
+SECTION = "## GAMMA on CUDA"
+PRIMITIVES = 20
+WANDR_FRAMES = 240
+BODIES = 64
+TOLERANCE_M = 1e-4
+BATCHES = (1_024, 4_096, 16_384)
+
+
+def rollout_positions(device: str, latents: torch.Tensor) -> torch.Tensor:
+    """(P, N, 10, 67 + 1, 3) markers and pelvis of every primitive of N = latents.shape[1] bodies stepped with
+    latents (P, N, 128) on `device` (fp32), from the same seeded starts; returned on the CPU."""
+    core = GammaReachCore(GammaReachConfig(device=device, precision="float32"))
+    state = core.sample_initial_state([np.random.default_rng(seed) for seed in range(latents.shape[1])])
+    frames = []
+    for z in latents:
+        state, result = core.step(state, z.to(device))
+        primitive = result.primitive
+        frames.append(torch.cat([primitive.markers, primitive.joints[:, :, :1]], dim=2).cpu())
+    return torch.stack(frames)
+
+
+def wandr_joints(device: str, latents: torch.Tensor) -> torch.Tensor:
+    """(T, N, 22, 3) joints of N bodies after each of T = latents.shape[0] WANDR frames (latents (T, N, 64))."""
+    from motion_envs.envs.wandr_reach import WandrReachConfig, WandrReachCore
+
+    core = WandrReachCore(WandrReachConfig(device=device, max_frames=latents.shape[0]))
+    state = core.sample_initial_state([np.random.default_rng(seed) for seed in range(latents.shape[1])])
+    frames = []
+    for z in latents:
+        state, _ = core.step(state, z.to(device))
+        frames.append(state.joints.cpu())
+    return torch.stack(frames)
+
+
+def agreement(positions, latents: torch.Tensor) -> float:
+    """Largest CPU-CUDA distance (m) of any position `positions(device, latents)` returns."""
+    return float((positions("cpu", latents) - positions("cuda", latents)).norm(dim=-1).max())
+
+
+def throughput(count: int, precision: str) -> float:
+    """Body-primitives/s of one CUDA step of `count` bodies (best of 3 after a warm-up)."""
+    core = GammaReachCore(GammaReachConfig(device="cuda", precision=precision))
+    state = core.sample_initial_state([np.random.default_rng(seed) for seed in range(count)])
+    state, _ = core.step(state, torch.zeros(count, core.generator.latent_size, device="cuda"))
+    z = torch.randn(count, core.generator.latent_size, device="cuda")
+    best = float("inf")
+    for _ in range(4):
+        torch.cuda.synchronize()
+        tick = time.perf_counter()
+        core.step(state, z)
+        torch.cuda.synchronize()
+        best = min(best, time.perf_counter() - tick)
+    return count / best
+
+
+def main() -> int:
+    if not torch.cuda.is_available():
+        print("bench gpu: no CUDA device here (torch.cuda.is_available() is False); nothing measured, nothing written")
+        return 0
+    began = time.perf_counter()
+    generator = torch.Generator().manual_seed(0)
+    gamma = agreement(rollout_positions, torch.randn(PRIMITIVES, BODIES, 128, generator=generator))
+    wandr = agreement(wandr_joints, torch.randn(WANDR_FRAMES, BODIES, 64, generator=generator))
+    distance = max(gamma, wandr)
+    rows = [(count, precision, throughput(count, precision)) for count in BATCHES for precision in ("float32", "bfloat16")]
+    verdict = "within" if distance <= TOLERANCE_M else "BEYOND"
+    lines = [
+        SECTION, "",
+        f"Agreement: {BODIES} bodies, the same latents on the CPU and on {torch.cuda.get_device_name()} (fp32): "
+        f"GAMMA, {PRIMITIVES} primitives, largest marker or pelvis distance {gamma * 1000:.4f} mm; WANDR, "
+        f"{WANDR_FRAMES} frames, largest joint distance {wandr * 1000:.4f} mm; {verdict} the {TOLERANCE_M * 1000:g} mm "
+        "tolerance.", "",
+        "| bodies | networks | body-primitives/s |", "|---|---|---|",
+        *[f"| {count:,} | {precision} | {rate:,.0f} |" for count, precision, rate in rows],
+        "", machine_line(), f"Command: `motion-envs bench gpu`; {time.perf_counter() - began:.0f} s in all.", "",
+    ]  # fmt: skip
+    section = "\n".join(lines)
+    print(section)
+    replace_section(RESULTS / "throughput.md", section)
+    return 0 if distance <= TOLERANCE_M else 1

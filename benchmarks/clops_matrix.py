@@ -235,8 +235,8 @@ def figure_of(rows: dict[str, dict[str, Scores]], families: tuple[str, ...]) -> 
     save(figure, RESULTS / "clops_matrix.png")
 
 
-def throughput_section(core: ClopsNavCore, bodies: int, actions: int) -> None:
-    """Measured ClopsNav stepping rate into `throughput.md`."""
+def stepping_rate(core: ClopsNavCore, bodies: int, actions: int) -> tuple[float, float]:
+    """(actions/s, body-frames/s) of `bodies` held-out episodes stepped `actions` random actions each."""
     state = episodes(core, bodies)
     controller = random_actions(0)
     tick = time.perf_counter()
@@ -244,8 +244,13 @@ def throughput_section(core: ClopsNavCore, bodies: int, actions: int) -> None:
     for _ in range(actions):
         state, _ = core.step(state, controller(core, state))
     seconds = time.perf_counter() - tick
-    frames = int(state.frame.sum() - frames_before)
+    return bodies * actions / seconds, int(state.frame.sum() - frames_before) / seconds
+
+
+def throughput_section(core: ClopsNavCore, bodies: int, actions: int) -> None:
+    """Measured ClopsNav stepping rate into `throughput.md`."""
+    per_action, per_frame = stepping_rate(core, bodies, actions)
     text = (f"ClopsNav-v0 ({core.config.family}, {core.config.width}×{core.config.height} views), {bodies} bodies, "
-            f"{actions} random actions each: {bodies * actions / seconds:.0f} actions/s, {frames / seconds:.0f} "
+            f"{actions} random actions each: {per_action:.0f} actions/s, {per_frame:.0f} "
             f"body-frames/s (decode, collisions, views). {machine_line()}")  # fmt: skip
     replace_section(RESULTS / "throughput.md", f"## ClopsNav stepping\n\n{text}\n")

@@ -138,4 +138,28 @@ def main(batches: tuple[int, ...] = (64, 128, 256, 512, 1024, 4096), bf16_batche
     section = "\n".join(lines)
     print(section)
     replace_section(RESULTS / "throughput.md", section)
+    other = other_envs_section()
+    print(other)
+    replace_section(RESULTS / "throughput.md", other)
     return 0
+
+
+def other_envs_section(bodies: int = 64, actions: int = 3) -> str:
+    """WANDR's decode at 1,024 bodies and ClopsNav's step at `bodies` (random actions), measured on the same machine
+    line as the GAMMA rollout (these priors run in fp32 on every CPU: they have no bf16 mode)."""
+    from benchmarks.clops_matrix import stepping_rate
+    from benchmarks.wandr_grid import decode_throughput
+    from motion_envs.envs.clops_nav import ClopsNavConfig, ClopsNavCore
+    from motion_envs.envs.wandr_reach import WandrReachConfig, WandrReachCore
+
+    wandr = decode_throughput(WandrReachCore(WandrReachConfig()))
+    per_action, per_frame = stepping_rate(ClopsNavCore(ClopsNavConfig(family="open", split="test")), bodies, actions)
+    return "\n".join([
+        "## Other envs' stepping (bench speed)", "",
+        "| env | bodies | rate | target |", "|---|---|---|---|",
+        f"| WandrReach-v0, prior step (decode, integrate, FK) | 1,024 | {wandr['prior']:,.0f} body-frames/s | ≥ 20,000 |",
+        f"| WandrReach-v0, env core step | 1,024 | {wandr['env']:,.0f} body-frames/s | |",
+        f"| ClopsNav-v0 (open, 64 × 64 views), random actions | {bodies} | {per_action:,.0f} actions/s ({per_frame:,.0f} "
+        "body-frames/s: decode, collisions, views) | |",
+        "", machine_line(), "Command: `motion-envs bench speed`.", "",
+    ])  # fmt: skip

@@ -183,3 +183,31 @@ def test_training_writes_to_its_run_folder_unless_shipped(walking_clips, tmp_pat
     train_pose_vae(dataclasses.replace(config, ship=True, run_dir=tmp_path / "run2"), poses, poses)
     assert (package / "gamma_pose_vae.pt").read_bytes() != before and shipped.read_bytes() == before
     assert "replacing the shipped" in capsys.readouterr().err
+
+
+def test_fused_bf16_regressor_blocks_match_the_plain_ones(generator):
+    from motion_envs.priors.gamma import FUSED_LINEAR, ResidualBlock
+
+    if FUSED_LINEAR is None:
+        pytest.skip("this torch has no oneDNN fused linear: the plain path is the only one")
+    block = ResidualBlock(128).to(torch.bfloat16)
+    x = torch.randn(64, 128, generator=generator).to(torch.bfloat16)
+    with torch.enable_grad():
+        plain = block(x)  # with autograd on, the plain modules run
+    with torch.no_grad():
+        fused = block(x)
+    assert fused.dtype == torch.bfloat16 and torch.allclose(fused.float(), plain.float(), atol=1e-2, rtol=1e-2)
+
+
+def test_fused_bf16_tanh_mlp_matches_the_plain_one(generator):
+    from motion_envs.priors.gamma import FUSED_LINEAR, tanh_mlp
+
+    if FUSED_LINEAR is None:
+        pytest.skip("this torch has no oneDNN fused linear: the plain path is the only one")
+    mlp = tanh_mlp([256, 512, 256]).to(torch.bfloat16)
+    x = torch.randn(64, 256, generator=generator).to(torch.bfloat16)
+    with torch.enable_grad():
+        plain = mlp(x)
+    with torch.no_grad():
+        fused = mlp(x)
+    assert torch.allclose(fused.float(), plain.float(), atol=2e-2)

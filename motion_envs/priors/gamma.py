@@ -28,6 +28,7 @@ from torch.nn import functional as F
 from motion_envs.body.rotations import matrix_to_axis_angle, matrix_to_sixd, rotation_matrix
 from motion_envs.body.skeleton import NUM_BODY_POSE_JOINTS
 from motion_envs.data.primitives import PRIMITIVE_FRAMES
+from motion_envs.precision import native_bf16
 
 NUM_MARKERS = 67
 MARKER_DIM = NUM_MARKERS * 3
@@ -40,9 +41,11 @@ FUSED_LINEAR = getattr(torch.ops.mkldnn, "_linear_pointwise", None) if torch.bac
 
 
 def fusable(x: torch.Tensor) -> bool:
-    """Whether `x` takes the fused path: bf16 inference on the CPU, where bf16 elementwise passes (bias, activation)
-    cost as much as the matmuls they follow, and oneDNN does them inside the matmul (same outputs; tested)."""
-    return FUSED_LINEAR is not None and x.dtype == torch.bfloat16 and x.device.type == "cpu" and not torch.is_grad_enabled()
+    """Whether `x` takes the fused path: bf16 inference on a CPU with native bf16 (oneDNN's bf16 kernels need it),
+    where bf16 elementwise passes (bias, activation) cost as much as the matmuls they follow, and oneDNN does them
+    inside the matmul (same outputs; tested)."""
+    return (FUSED_LINEAR is not None and x.dtype == torch.bfloat16 and x.device.type == "cpu" and not torch.is_grad_enabled()
+            and native_bf16())  # fmt: skip
 
 
 class TanhMLP(nn.Sequential):

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import torch
 
-from agents.policy_files import POLICY_KINDS, PolicyFileError, read_policy_file
+from agents.policy_files import PolicyFileError, expect_policy
 from agents.ppo_kl import PPOKL
 from motion_envs.batched import BatchedState
 from motion_envs.envs.core import BatchedCore
@@ -23,9 +23,7 @@ class PolicyLatent:
     `file` says what it was trained for (`agents.policy_files`); a file of another kind fails here, by name."""
 
     def __init__(self, path: str | Path, deterministic: bool = False, seed: int = 0) -> None:
-        self.file = read_policy_file(path)
-        if self.file.kind != "ppo_policy":
-            raise PolicyFileError(f"{path} holds {POLICY_KINDS[self.file.kind]}, not {POLICY_KINDS['ppo_policy']}")
+        self.file = expect_policy(path, "ppo_policy")
         self.model = PPOKL.load(path, device="cpu")
         self.deterministic = deterministic
         self.generator = torch.Generator().manual_seed(seed)

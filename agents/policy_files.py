@@ -11,6 +11,7 @@ another env fails with a sentence instead of a shape error inside torch.
 from __future__ import annotations
 
 import json
+import zipfile
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -69,7 +70,7 @@ def read_policy_file(path: str | Path) -> PolicyFile:
         FileNotFoundError: no such file (named as given: SB3 would look for `path.zip`).
         PolicyFileError: not an SB3 save, or of another kind than `POLICY_KINDS`.
     """
-    from stable_baselines3.common.save_util import load_from_zip_file
+    from stable_baselines3.common.save_util import json_to_data
     from stable_baselines3.dqn.policies import DQNPolicy
 
     from agents.ppo_kl import LatentPriorPolicy
@@ -77,9 +78,10 @@ def read_policy_file(path: str | Path) -> PolicyFile:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"no policy file at {path}")
-    try:
-        data, _, _ = load_from_zip_file(path, device="cpu", load_data=True)
-    except Exception as error:  # SB3 raises zipfile, JSON and pickle errors alike
+    try:  # only the archive's "data" entry (spaces, policy class, trained_for): the weights are not read
+        with zipfile.ZipFile(path) as archive:
+            data = json_to_data(archive.read("data").decode())
+    except Exception as error:  # zipfile, a missing entry, JSON and pickle errors alike
         raise PolicyFileError(f"{path} is not a saved Stable-Baselines3 policy ({type(error).__name__}: {error})") from error
     policy_class = (data or {}).get("policy_class")
     if isinstance(policy_class, type) and issubclass(policy_class, DQNPolicy):
@@ -105,8 +107,9 @@ def _from_manifest(path: Path) -> TrainedFor | None:
     return TrainedFor.of_config(record["config"])
 
 
-def expect_policy(path: str | Path, env_id: str, kind: str) -> PolicyFile:
-    """The policy file at `path`, checked to be of `kind` and (where it says) trained for `env_id`.
+def expect_policy(path: str | Path, kind: str, env_id: str | None = None) -> PolicyFile:
+    """The policy file at `path`, checked to be of `kind` and (where it says, and `env_id` is given) trained for
+    `env_id`.
 
     Raises:
         PolicyFileError: another kind of policy, or one trained for another env (both named).
@@ -114,8 +117,9 @@ def expect_policy(path: str | Path, env_id: str, kind: str) -> PolicyFile:
     policy = read_policy_file(path)
     trained = "" if policy.trained_for is None else f", trained for {policy.trained_for.describe()}"
     if policy.kind != kind:
-        raise PolicyFileError(f"{policy.path} holds {POLICY_KINDS[policy.kind]}{trained}; {env_id} needs {POLICY_KINDS[kind]}")
-    if policy.trained_for is not None and policy.trained_for.env_id != env_id:
+        raise PolicyFileError(f"{policy.path} holds {POLICY_KINDS[policy.kind]}{trained}; {env_id or 'this controller'} "
+                              f"needs {POLICY_KINDS[kind]}")  # fmt: skip
+    if env_id is not None and policy.trained_for is not None and policy.trained_for.env_id != env_id:
         raise PolicyFileError(f"{policy.path} was trained for {policy.trained_for.describe()}, not {env_id}")
     return policy
 

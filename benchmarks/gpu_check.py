@@ -21,6 +21,7 @@ import torch
 
 from benchmarks.machine import machine_line
 from benchmarks.sections import replace_section
+from benchmarks.throughput import best_seconds, walking_state
 from motion_envs.envs.gamma_reach import GammaReachConfig, GammaReachCore
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -63,20 +64,18 @@ def agreement(positions, latents: torch.Tensor) -> float:
     return float((positions("cpu", latents) - positions("cuda", latents)).norm(dim=-1).max())
 
 
-def throughput(count: int, precision: str) -> float:
-    """Body-primitives/s of one CUDA step of `count` bodies (best of 3 after a warm-up)."""
-    core = GammaReachCore(GammaReachConfig(device="cuda", precision=precision))
-    state = core.sample_initial_state([np.random.default_rng(seed) for seed in range(count)])
-    state, _ = core.step(state, torch.zeros(count, core.generator.latent_size, device="cuda"))
-    z = torch.randn(count, core.generator.latent_size, device="cuda")
-    best = float("inf")
-    for _ in range(4):
-        torch.cuda.synchronize()
-        tick = time.perf_counter()
+def throughput(core: GammaReachCore, count: int, precision: str) -> float:
+    """Body-primitives/s of one step of `count` walking bodies on the CUDA `core` with its networks in `precision`
+    (best of 3 after a warm-up, each call waited for)."""
+    core.generator.set_precision(precision)
+    state = walking_state(core, count)
+    z = torch.randn(count, core.generator.latent_size, device=core.device)
+
+    def step() -> None:
         core.step(state, z)
         torch.cuda.synchronize()
-        best = min(best, time.perf_counter() - tick)
-    return count / best
+
+    return count / best_seconds(step, 3)
 
 
 def main() -> int:
@@ -88,7 +87,8 @@ def main() -> int:
     gamma = agreement(rollout_positions, torch.randn(PRIMITIVES, BODIES, 128, generator=generator))
     wandr = agreement(wandr_joints, torch.randn(WANDR_FRAMES, BODIES, 64, generator=generator))
     distance = max(gamma, wandr)
-    rows = [(count, precision, throughput(count, precision)) for count in BATCHES for precision in ("float32", "bfloat16")]
+    core = GammaReachCore(GammaReachConfig(device="cuda"))
+    rows = [(count, precision, throughput(core, count, precision)) for count in BATCHES for precision in ("float32", "bfloat16")]
     verdict = "within" if distance <= TOLERANCE_M else "BEYOND"
     lines = [
         SECTION, "",

@@ -7,20 +7,15 @@ import platform
 
 import torch
 
-from motion_envs.precision import cpu_flags, native_bf16
+from motion_envs.precision import cpu_flags, cpu_model, native_bf16
 
 ISA_FLAGS = ("avx2", "fma", "avx512f", "avx512_bf16", "avx512_fp16", "amx_tile", "amx_bf16")
 """The instruction-set flags that decide torch's CPU kernels (and whether bf16 is native), as /proc/cpuinfo names them."""
 
 
 def machine_line() -> str:
-    """One Markdown line: CPU, cores, torch version and thread count."""
-    cpu = platform.processor() or platform.machine()
-    try:
-        with open("/proc/cpuinfo") as info:
-            cpu = next(line.split(":", 1)[1].strip() for line in info if line.startswith("model name"))
-    except (OSError, StopIteration):
-        pass
+    """One Markdown line: CPU model, cores, ISA flags, torch version and thread count."""
+    cpu = cpu_model() or platform.processor() or platform.machine()
     flags = [flag for flag in ISA_FLAGS if flag in cpu_flags()]
     native = "native bf16" if native_bf16() else "no native bf16 (emulated)"
     return (

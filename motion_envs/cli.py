@@ -102,7 +102,7 @@ def _bench_gamma_realism(args: argparse.Namespace) -> int:
 def _play(args: argparse.Namespace) -> int:
     from motion_envs.play import play
 
-    env_kwargs = dict(_env_option(option) for option in args.env_option)
+    env_kwargs = _env_options(args)
     for summary in play(args.env_id, args.policy, args.baseline, args.video, args.seed, args.episodes, args.every, args.search,
                         args.save_rollout, **env_kwargs):  # fmt: skip
         print(" ".join(f"{name}={value}" for name, value in summary.items()))
@@ -121,7 +121,7 @@ def _view(args: argparse.Namespace) -> int:
     if (args.rollout is None) == (args.env is None):
         print("motion-envs view: give a rollout file or --env (live), not both", file=sys.stderr)
         return 2
-    env_kwargs = dict(_env_option(option) for option in args.env_option)
+    env_kwargs = _env_options(args)
     live = LiveEpisodes(args.env, args.policy, args.baseline, args.seed, env_kwargs) if args.env else None
     rollout = Rollout.load(args.rollout) if args.rollout else live.more()
     scene = _scene_argument(args.scene or rollout.scene or None, args.scene_file)  # a ClopsNav rollout names its room
@@ -155,7 +155,7 @@ def _train_ppo(args: argparse.Namespace) -> int:
              "total_timesteps": args.timesteps, "run_dir": args.run_dir, "weights": args.weights, "seed": args.seed,
              "init": args.init, "log_std_init": args.log_std_init, "learning_rate": args.learning_rate,
              "n_steps": args.n_steps, "anchor": args.anchor, "ship": args.ship or None, "device": args.device,
-             "env_kwargs": dict(_env_option(option) for option in args.env_option) or None}  # fmt: skip
+             "env_kwargs": _env_options(args) or None}  # fmt: skip
     config = PPOTrainConfig(command="motion-envs " + " ".join(sys.argv[1:]),
                             **{name: value for name, value in given.items() if value is not None})  # fmt: skip
     if config.run_dir == PPOTrainConfig.run_dir:
@@ -181,7 +181,7 @@ def _train_dqn(args: argparse.Namespace) -> int:
     given = {"family": args.family, "known_goal": args.known_goal or None, "goal_memory": args.goal_memory or None,
              "num_envs": args.num_envs, "total_timesteps": args.timesteps, "run_dir": args.run_dir, "weights": args.weights, "seed": args.seed,
              "learning_rate": args.learning_rate, "batch_size": args.batch_size, "ship": args.ship or None, "device": args.device,
-             "env_kwargs": dict(_env_option(option) for option in args.env_option) or None}  # fmt: skip
+             "env_kwargs": _env_options(args) or None}  # fmt: skip
     config = DQNTrainConfig(command="motion-envs " + " ".join(sys.argv[1:]),
                             **{name: value for name, value in given.items() if value is not None})  # fmt: skip
     if config.run_dir == DQNTrainConfig.run_dir:
@@ -191,6 +191,11 @@ def _train_dqn(args: argparse.Namespace) -> int:
     print(f"{entry['timesteps']} steps; latest success rate {last.get('success_rate', float('nan')):.2f}; "
           f"weights {config.weights_path()}")
     return 0
+
+
+def _env_options(args: argparse.Namespace) -> dict[str, object]:
+    """The command's repeated `--env-option key=value` as gym.make keyword arguments."""
+    return dict(_env_option(option) for option in args.env_option)
 
 
 def _env_option(option: str) -> tuple[str, object]:

@@ -49,7 +49,7 @@ def policy_env_kwargs(env_id: str, policy: Path | None, env_kwargs: dict | None 
 
     if env_id not in POLICY_KIND:
         raise ValueError(f"play supports {GAMMA_ID}, {WANDR_ID} and {CLOPS_ID}, got {env_id!r}")
-    file = None if policy is None else expect_policy(policy, env_id, POLICY_KIND[env_id])
+    file = None if policy is None else expect_policy(policy, POLICY_KIND[env_id], env_id)
     return file, env_kwargs_for(file, env_kwargs)
 
 

@@ -18,26 +18,25 @@ NATIVE_BF16_FLAGS = ("amx_bf16", "avx512_bf16")
 """CPU flags (as /proc/cpuinfo names them) of native bf16 matrix arithmetic."""
 
 
-@functools.cache
-def cpu_flags() -> frozenset[str]:
-    """The flags of this machine's first CPU in /proc/cpuinfo (empty where there is none, e.g. macOS)."""
-    info = Path("/proc/cpuinfo")
-    if not info.is_file():
-        return frozenset()
-    for line in info.read_text(errors="replace").splitlines():
-        if line.startswith(("flags", "Features")):
-            return frozenset(line.split(":", 1)[1].split())
-    return frozenset()
-
-
-def cpu_model() -> str:
-    """The CPU's model name from /proc/cpuinfo ('' where there is none)."""
+def _cpuinfo(*keys: str) -> str:
+    """The value of the first /proc/cpuinfo line starting with one of `keys` ('' where there is none, e.g. macOS)."""
     info = Path("/proc/cpuinfo")
     if info.is_file():
         for line in info.read_text(errors="replace").splitlines():
-            if line.startswith("model name"):
+            if line.startswith(keys):
                 return line.split(":", 1)[1].strip()
     return ""
+
+
+@functools.cache
+def cpu_flags() -> frozenset[str]:
+    """The flags of this machine's first CPU (x86 "flags", Arm "Features")."""
+    return frozenset(_cpuinfo("flags", "Features").split())
+
+
+def cpu_model() -> str:
+    """The CPU's model name ('' where /proc/cpuinfo has none)."""
+    return _cpuinfo("model name")
 
 
 def native_bf16(device: str | torch.device = "cpu", flags: frozenset[str] | None = None) -> bool:

@@ -47,7 +47,7 @@ def test_a_policy_for_another_env_or_of_another_kind_fails_before_the_first_step
     with pytest.raises(PolicyFileError, match="expects the observation space Dict"):
         play(CLOPS_ID, MEMORY_POLICY, goal_memory=False)  # overriding what it was trained for
     with pytest.raises(FileNotFoundError, match=r"nope\.zip$"):  # SB3 alone looks for nope.zip.zip
-        expect_policy(tmp_path / "nope.zip", GAMMA_ID, "ppo_policy")
+        expect_policy(tmp_path / "nope.zip", "ppo_policy", GAMMA_ID)
     garbage = tmp_path / "garbage.zip"
     garbage.write_bytes(b"not a zip at all")
     with pytest.raises(PolicyFileError, match="garbage.zip is not a saved Stable-Baselines3 policy"):

@@ -137,8 +137,9 @@ def check_plausible(motion: BodyMotion, relative: str) -> None:
     if motion.num_frames < 2:
         raise ValueError(f"{relative}: {motion.num_frames} frame(s) after resampling; a clip needs at least 2")
     for name in ("transl", "global_orient", "body_pose"):
-        values = np.asarray(getattr(motion, name), dtype=np.float64)
-        if not np.isfinite(values.astype(np.float32)).all():
+        with np.errstate(over="ignore"):  # beyond float32's range becomes inf: refused here
+            cached = np.asarray(getattr(motion, name), dtype=np.float32)
+        if not np.isfinite(cached).all():
             raise ValueError(f"{relative}: non-finite {name} (values beyond float32's range or NaN)")
     reach = float(np.abs(motion.transl).max())
     if reach > MAX_EXTENT:

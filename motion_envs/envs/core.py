@@ -111,9 +111,8 @@ def _type_name(hint: Any) -> str:
     return hint.__name__ if plain else str(hint).replace("typing.", "").replace("NoneType", "None")
 
 
-AUTORESET_MODES = {AutoresetMode.SAME_STEP: AutoresetMode.SAME_STEP, AutoresetMode.NEXT_STEP: AutoresetMode.NEXT_STEP,
-                   "same_step": AutoresetMode.SAME_STEP, "next_step": AutoresetMode.NEXT_STEP}  # fmt: skip
-"""The vector envs' autoreset modes, by enum or name."""
+AUTORESET_MODES = {"same_step": AutoresetMode.SAME_STEP, "next_step": AutoresetMode.NEXT_STEP}
+"""The vector envs' autoreset modes by name (the `AutoresetMode` values themselves are taken too)."""
 
 Observation = Any
 """A batch of observations: an array (N, ...) or a dict of them."""
@@ -176,9 +175,10 @@ class CoreVectorEnv(VectorEnv):
                  render_bodies: int = 8, autoreset_mode: AutoresetMode | str = AutoresetMode.SAME_STEP) -> None:  # fmt: skip
         if render_mode not in (None, *self.metadata["render_modes"]):
             raise ValueError(f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}")
-        if autoreset_mode not in AUTORESET_MODES:
-            raise ValueError(f"autoreset_mode must be one of {sorted(map(str, AUTORESET_MODES))}, got {autoreset_mode!r}")
-        self.metadata = {**self.metadata, "autoreset_mode": AUTORESET_MODES[autoreset_mode]}
+        mode = autoreset_mode if isinstance(autoreset_mode, AutoresetMode) else AUTORESET_MODES.get(autoreset_mode)
+        if mode not in AUTORESET_MODES.values():
+            raise ValueError(f"autoreset_mode must be one of {sorted(AUTORESET_MODES)}, got {autoreset_mode!r}")
+        self.metadata = {**self.metadata, "autoreset_mode": mode}
         self._restart_next = torch.zeros(num_envs, dtype=torch.bool)
         """NEXT_STEP mode: bodies that ended in the last step and restart in the next one."""
         self.render_mode, self.render_bodies = render_mode, render_bodies

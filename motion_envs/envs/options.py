@@ -46,23 +46,15 @@ def real_array(value: Any, name: str) -> np.ndarray:
     return array
 
 
-def point(options: dict[str, Any], name: str, size: int) -> np.ndarray | None:
-    """(size,) float64 of `options[name]` (None when absent), finite."""
+def point(options: dict[str, Any], name: str, size: int, many: bool = False) -> np.ndarray | None:
+    """(size,) float64 of `options[name]`, or with `many` (K, size) with K ≥ 1; None when absent; finite."""
     if name not in options:
         return None
     array = real_array(options[name], name)
-    if array.shape != (size,):
-        raise ValueError(f"option {name!r} must be {size} numbers, got shape {array.shape}: {options[name]!r}")
-    return array
-
-
-def points(options: dict[str, Any], name: str, size: int) -> np.ndarray | None:
-    """(K, size) float64, K ≥ 1, of `options[name]` (None when absent), finite."""
-    if name not in options:
-        return None
-    array = real_array(options[name], name)
-    if array.ndim != 2 or array.shape[1] != size or len(array) == 0:
-        raise ValueError(f"option {name!r} must be a list of points of {size} numbers, got shape {array.shape}")
+    fits = (array.ndim == 2 and array.shape[1] == size and len(array) > 0) if many else array.shape == (size,)
+    if not fits:
+        expected = f"a list of points of {size} numbers" if many else f"{size} numbers"
+        raise ValueError(f"option {name!r} must be {expected}, got shape {array.shape}: {options[name]!r}")
     return array
 
 

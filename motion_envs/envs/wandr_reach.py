@@ -92,7 +92,7 @@ from motion_envs.batched import where_bodies
 from motion_envs.body import BodyModel
 from motion_envs.body.rotations import matrix_to_sixd
 from motion_envs.envs.core import CoreVectorEnv, check_actions, config_from_kwargs
-from motion_envs.envs.options import check_known, index, number, point, points
+from motion_envs.envs.options import check_known, index, number, point
 from motion_envs.envs.starts import DeltaPriorBodies, StartBodies
 from motion_envs.metrics import lowest_foot, track_skating
 from motion_envs.priors.train_wandr import load_wandr
@@ -253,7 +253,7 @@ class WandrReachCore:
                           for rng in rngs])  # fmt: skip
         start_index, facing = torch.tensor(rows), torch.tensor(facings, dtype=torch.float32)
         count = len(rngs)
-        given = points(options, "goals", 3) if "goals" in options else point(options, "goal", 3)
+        given = point(options, "goals", 3, many=True) if "goals" in options else point(options, "goal", 3)
         if given is not None:
             goals = torch.as_tensor(given.reshape(-1, 3), dtype=torch.float32).expand(count, -1, -1)
         else:

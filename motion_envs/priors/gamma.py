@@ -48,16 +48,19 @@ def fusable(x: torch.Tensor) -> bool:
             and native_bf16())  # fmt: skip
 
 
+def fused_layers(x: torch.Tensor, linears: list[nn.Linear], activation: str) -> torch.Tensor:
+    """`activation`("relu" | "tanh")(linear(x)) through `linears` in turn, each as one oneDNN call (`fusable` x)."""
+    for linear in linears:
+        x = FUSED_LINEAR(x, linear.weight, linear.bias, activation, [], "")
+    return x
+
+
 class TanhMLP(nn.Sequential):
     """Linear layers with tanh after every one (the release's MLP); `fusable` inputs take oneDNN's fused
     linear + tanh (1,024 × 256 -> 512: 0.83 -> 0.27 ms)."""
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        if not fusable(x):
-            return super().forward(x)
-        for linear in self[::2]:
-            x = FUSED_LINEAR(x, linear.weight, linear.bias, "tanh", [], "")
-        return x
+        return fused_layers(x, list(self[::2]), "tanh") if fusable(x) else super().forward(x)
 
 
 def tanh_mlp(sizes: list[int]) -> TanhMLP:
@@ -210,11 +213,7 @@ class ResidualBlock(nn.Module):
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """x + relu(W2 relu(W1 x + b1) + b2); `fusable` inputs take oneDNN's fused linear + ReLU (the regressor at
         1,024 bodies × 8 frames: 33 -> 23 ms)."""
-        if fusable(x):
-            first, second = self.layers[0], self.layers[2]
-            inner = FUSED_LINEAR(x, first.weight, first.bias, "relu", [], "")
-            return x + FUSED_LINEAR(inner, second.weight, second.bias, "relu", [], "")
-        return x + self.layers(x)
+        return x + (fused_layers(x, [self.layers[0], self.layers[2]], "relu") if fusable(x) else self.layers(x))
 
 
 class BodyRegressor(nn.Module):

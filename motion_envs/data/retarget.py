@@ -1,12 +1,18 @@
 """Retargeting captured motion onto the body.
 
-1. Scale: the source is scaled uniformly so its rest height (head joint above
-   the ankles) equals the body's.
+1. Scale: the source is scaled uniformly so its standing height equals the
+   body's, measured along the bones (leg: hip -> knee -> ankle; trunk: pelvis
+   -> ... -> head over the joints both skeletons have), so that it does not
+   depend on the rest pose (ACCAD's rest pose bends the trunk 90° forward).
 2. Rotation transfer with rest-pose correction: each mapped body joint takes
    the world rotation of its source joint relative to the source's rest, times
-   a fixed rotation A_j that turns the body's rest bone (joint -> its mapped
-   child) onto the source's rest bone. This absorbs different rest poses
-   (e.g. Acclaim's legs spread 20°) and gives twist and end-joint orientation.
+   a fixed rotation A_j that turns the body's rest bones onto the source's rest
+   bones: towards its one mapped child (the smallest rotation), or, for a joint
+   whose first mapped descendants are several (the pelvis: hips and spine; the
+   chest: neck and collars), the rotation that best aligns all those bones
+   (`roma.rigid_vectors_registration`). This absorbs different rest poses
+   (Acclaim's legs spread 20°, ACCAD's bent trunk, a source facing +X) and
+   gives twist and end-joint orientation.
 3. Position refinement: Adam on 6-D rotations and the pelvis position, batched
    over all frames, pulls the body's joints onto the scaled source joints,
    with a pull towards step 2's rotations that keeps what positions cannot
@@ -66,6 +72,26 @@ def _align(source_dir: np.ndarray, target_dir: np.ndarray) -> np.ndarray:
     return roma.rotvec_to_rotmat(torch.as_tensor(axis / np.linalg.norm(axis) * angle)).numpy()
 
 
+def _first_mapped_descendants(joint: int, mapped: np.ndarray) -> list[int]:
+    """Body joints below `joint` that are mapped and have no mapped joint between them and it."""
+    found: list[int] = []
+    for child in (c for c, p in enumerate(PARENTS) if p == joint):
+        found += [child] if mapped[child] else _first_mapped_descendants(child, mapped)
+    return found
+
+
+def standing_height(points: np.ndarray, joint_ids: np.ndarray, mapped: np.ndarray) -> float:
+    """Leg length (hip -> knee -> ankle, mean of both legs) plus the trunk's length (pelvis -> ... -> head over
+    the mapped joints), along the bones of a skeleton whose body joint j sits at `points[joint_ids[j]]`."""
+
+    def path(names: tuple[str, ...]) -> float:
+        chain = points[[joint_ids[JOINT_NAMES.index(n)] for n in names if mapped[JOINT_NAMES.index(n)]]]
+        return float(np.linalg.norm(np.diff(chain, axis=0), axis=-1).sum())
+
+    legs = [path((f"{side}_hip", f"{side}_knee", f"{side}_ankle")) for side in ("left", "right")]
+    return float(np.mean(legs)) + path(("pelvis", "spine1", "spine2", "spine3", "neck", "head"))
+
+
 def retarget(
     source: SourceMotion,
     mapping: SkeletonMap,
@@ -85,23 +111,23 @@ def retarget(
     rest = source.skeleton.rest_positions() @ to_z.T
     body_rest = body.rest_joints.double().numpy()
 
-    ankles = [JOINT_NAMES.index("left_ankle"), JOINT_NAMES.index("right_ankle")]
-
-    def height(points: np.ndarray, joint_ids: np.ndarray) -> float:
-        """Rest height: head joint above the mean ankle."""
-        return float(points[joint_ids[JOINT_NAMES.index("head")], 2] - points[joint_ids[ankles], 2].mean())
-
-    scale = height(body_rest, np.arange(22)) / height(rest, src)
+    scale = standing_height(body_rest, np.arange(22), mapped) / standing_height(rest, src, mapped)
     positions = positions * scale
     rest = (rest - rest[src[0]]) * scale
 
-    aligned = np.empty((22, 3, 3))  # A_j: body rest bone onto the source rest bone
+    aligned = np.empty((22, 3, 3))  # A_j: body rest bones onto the source rest bones
     for j, parent in enumerate(PARENTS):
-        children = [c for c, p in enumerate(PARENTS) if p == j and mapped[c]]
+        descendants = _first_mapped_descendants(j, mapped)
         aligned[j] = np.eye(3) if mapped[j] else aligned[parent]
-        if mapped[j] and len(children) == 1:
-            c = children[0]
-            aligned[j] = _align(body_rest[c] - body_rest[j], rest[src[c]] - rest[src[j]])
+        body_bones = body_rest[descendants] - body_rest[j]
+        source_bones = rest[src[descendants]] - rest[src[j]]
+        lengths = np.minimum(np.linalg.norm(body_bones, axis=-1), np.linalg.norm(source_bones, axis=-1))
+        body_bones, source_bones = body_bones[lengths > 1e-6], source_bones[lengths > 1e-6]  # Max: collar at chest
+        if mapped[j] and len(body_bones) == 1:
+            aligned[j] = _align(body_bones[0], source_bones[0])
+        elif mapped[j] and len(body_bones) > 1:
+            unit = lambda v: torch.as_tensor(v / np.linalg.norm(v, axis=-1, keepdims=True))  # noqa: E731
+            aligned[j] = roma.rigid_vectors_registration(unit(body_bones), unit(source_bones)).numpy()
     transferred = rotations[:, np.where(mapped, src, 0)] @ aligned  # (T, 22, 3, 3)
     for j, parent in enumerate(PARENTS):  # unmapped joints keep their parent's rotation
         if not mapped[j]:

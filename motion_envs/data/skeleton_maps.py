@@ -20,8 +20,8 @@ class SkeletonMap:
 
     name: shown in reports. joints: body joint name -> source joint name or None.
     leading_frames_to_skip: frames the converter prepended (e.g. a T-pose).
-    Sources are Y up and face +Z at rest, as both known skeletons do
-    (retargeting lifts them with `Y_UP_TO_Z_UP`).
+    Sources are Y up (retargeting lifts them with `Y_UP_TO_Z_UP`); their rest
+    pose and facing may differ from the body's.
     """
 
     name: str
@@ -63,7 +63,33 @@ CMU_ACCLAIM = SkeletonMap(
     },  # fmt: skip
 )
 
-KNOWN_MAPS: tuple[SkeletonMap, ...] = (CMU_DAZ_BVH, CMU_ACCLAIM)
+CMU_MAX_BVH = SkeletonMap(
+    name="CMU cgspeed 3dsMax-friendly BVH",
+    joints={
+        "pelvis": "Hips", "left_hip": "LeftHip", "right_hip": "RightHip", "spine1": "Chest",
+        "left_knee": "LeftKnee", "right_knee": "RightKnee", "spine2": "Chest2", "left_ankle": "LeftAnkle",
+        "right_ankle": "RightAnkle", "spine3": None, "left_foot": "LeftToe", "right_foot": "RightToe",
+        "neck": "Neck", "left_collar": "LeftCollar", "right_collar": "RightCollar", "head": "Head",
+        "left_shoulder": "LeftShoulder", "right_shoulder": "RightShoulder", "left_elbow": "LeftElbow",
+        "right_elbow": "RightElbow", "left_wrist": "LeftWrist", "right_wrist": "RightWrist",
+    },  # fmt: skip
+)
+"""The Acclaim layout under other names (lowerback/upperback/thorax = lowerback/Chest/Chest2); no added T-pose."""
+
+ACCAD_BVH = SkeletonMap(
+    name="ACCAD MoCap Lab BVH",
+    joints={
+        "pelvis": "Hips", "left_hip": "LeftUpLeg", "right_hip": "RightUpLeg", "spine1": "ToSpine",
+        "left_knee": "LeftLeg", "right_knee": "RightLeg", "spine2": "Spine", "left_ankle": "LeftFoot",
+        "right_ankle": "RightFoot", "spine3": "Spine1", "left_foot": "LeftToeBase", "right_foot": "RightToeBase",
+        "neck": "Neck", "left_collar": "LeftShoulder", "right_collar": "RightShoulder", "head": "Head",
+        "left_shoulder": "LeftArm", "right_shoulder": "RightArm", "left_elbow": "LeftForeArm",
+        "right_elbow": "RightForeArm", "left_wrist": "LeftHand", "right_wrist": "RightHand",
+    },  # fmt: skip
+)
+"""22 joints; its rest pose bends the trunk 90° forward and faces +X (retargeting's rest alignment absorbs it)."""
+
+KNOWN_MAPS: tuple[SkeletonMap, ...] = (CMU_DAZ_BVH, CMU_ACCLAIM, CMU_MAX_BVH, ACCAD_BVH)
 
 class UnknownSkeletonError(ValueError):
     """No known map fits a skeleton; the message lists its joints."""

@@ -14,6 +14,7 @@ from motion_envs.data.dataset import MotionDataset
 from motion_envs.data.mirror import mirror
 from motion_envs.data.motion import BodyMotion
 from motion_envs.data.resample import resample_body, resample_times
+from motion_envs.data.cleanup import CleanupConfig
 from motion_envs.data.retarget import RetargetConfig
 from motion_envs.data.splits import SPLITS, split_of
 from motion_envs.data.start_poses import load_start_poses
@@ -75,15 +76,23 @@ def test_split_is_fixed_and_every_split_holds_cmu_walking():
 @pytest.mark.mocap
 @pytest.mark.parametrize("clip", ["cmu/07_01.bvh", "hdm05/HDM_bd_jogLeftCircle4StepsRstart_001_120.amc"])
 def test_real_clip_retargets_within_three_centimetres_and_is_canonical(mocap_dir, body, clip):
+    """Uncleaned, the first frame's lowest foot point is the floor; cleaned, the floor the contacts stand on is."""
     source = next(s for s in find_sources(mocap_dir) if s.relative == clip)
-    motion = load_clip(source, 30, body, RetargetConfig())
-    error = np.nanmean(motion.info["retarget_error"])
-    assert error < 0.03, f"{clip}: mean joint error {error * 100:.1f} cm"
-    with torch.no_grad():
-        first = body(*(t[:1] for t in body_tensors(motion))).joints[0].numpy()
-    np.testing.assert_allclose(first[0, :2], 0.0, atol=1e-5)  # pelvis over the origin
-    assert abs(facing_angle(first)) < 1e-4  # facing +y
-    assert abs(lowest_foot_points(motion, body)[0, 2]) < 1e-4  # lowest foot point on the ground
+    for cleanup in (None, CleanupConfig()):
+        motion = load_clip(source, 30, body, RetargetConfig(), cleanup)
+        error = np.nanmean(motion.info["retarget_error"])
+        assert error < 0.03, f"{clip}: mean joint error {error * 100:.1f} cm"
+        with torch.no_grad():
+            first = body(*(t[:1] for t in body_tensors(motion))).joints[0].numpy()
+        np.testing.assert_allclose(first[0, :2], 0.0, atol=1e-5)  # pelvis over the origin
+        assert abs(facing_angle(first)) < 1e-4  # facing +y
+        lowest = lowest_foot_points(motion, body)[:, 2]
+        if cleanup is None:
+            assert abs(lowest[0]) < 1e-4  # lowest foot point on the ground
+        else:
+            standing = motion.info["contacts"].any(axis=1)
+            assert standing.mean() > 0.5 and abs(np.median(lowest[standing])) < 0.01
+            assert lowest.min() > -0.03
 
 
 def _write_amass_folder(folder, seed=0):

@@ -190,6 +190,31 @@ def foot_vertex_ids(rest: RestBody | None = None) -> torch.Tensor:
     return torch.as_tensor(np.sort(np.concatenate(ids)), dtype=torch.long)
 
 
+SOLE_POINTS: tuple[str, ...] = ("left_heel", "left_toe", "right_heel", "right_toe")
+"""The four contact points of `sole_vertex_ids`, in its order."""
+
+
+def sole_vertex_ids(rest: RestBody | None = None) -> torch.Tensor:
+    """(4,) vertex ids of the heel and the toe of each foot's sole (`SOLE_POINTS` order).
+
+    Of each part's sole (its vertices within 1.5 cm of its lowest point at rest), heel: the lowest vertex of the
+    ankle part's rearmost 3 cm; toe: the lowest of the toe part's foremost 3 cm. Both touch the floor (within
+    about 1 cm) when the foot stands flat; a rolling foot loads the heel first and the toe last, so contact is
+    labelled (and locked) for each point on its own.
+    """
+    rest = rest_body() if rest is None else rest
+    dominant = rest.skin_joints[np.arange(len(rest.vertices)), rest.skin_weights.argmax(axis=1)]
+    ids = []
+    for side in ("left", "right"):
+        for joint, forward in ((f"{side}_ankle", -1.0), (f"{side}_foot", 1.0)):
+            part = np.flatnonzero(dominant == JOINT_NAMES.index(joint))
+            sole = part[rest.vertices[part, 2] < rest.vertices[part, 2].min() + 0.015]
+            along = forward * rest.vertices[sole, 1]
+            end = sole[along > along.max() - 0.03]
+            ids.append(int(end[np.argmin(rest.vertices[end, 2])]))
+    return torch.tensor(ids, dtype=torch.long)
+
+
 if __name__ == "__main__":
     placed = list(place_all().items())
     for start in range(0, len(placed), 6):

@@ -1,4 +1,4 @@
-"""`motion-envs data build`: mocap folder -> retargeted, canonical body motion cache.
+"""`motion-envs data build`: mocap folder -> retargeted, cleaned, canonical body motion cache.
 
 One `.npz` per frame rate, named by a content hash of the source files, the
 data code and the settings, so an unchanged rebuild only re-hashes and
@@ -6,6 +6,10 @@ returns. Clips that fail to parse or retarget, for any reason, are reported
 with their file and reason and listed in the cache (`failures`), never silently
 dropped, and the rest are built; every clip's values are checked finite (in
 float32, as cached) and plausible (`check_plausible`) before they enter the cache.
+Cleanup (`motion_envs.data.cleanup`: contacts, floor, foot locking) is on by
+default and part of the cache key; `cleanup=None` (`--no-cleanup`) builds the
+uncleaned data to compare. The cache holds each frame's sole contacts
+(`contacts`, (T, 4) bool, `SOLE_POINTS` order; all False without cleanup).
 """
 
 from __future__ import annotations
@@ -24,7 +28,9 @@ from motion_envs.body import BodyModel
 from motion_envs.data.amass import read_amass_npz
 from motion_envs.data.asf_amc import read_amc, read_asf
 from motion_envs.data.bvh import read_bvh
+from motion_envs.body.markers import SOLE_POINTS
 from motion_envs.data.canonical import canonicalise
+from motion_envs.data.cleanup import CleanupConfig, clean
 from motion_envs.data.motion import BodyMotion, MocapFormatError
 from motion_envs.data.paths import default_cache_dir, default_mocap_dir
 from motion_envs.data.resample import resample_body, resample_source
@@ -33,7 +39,7 @@ from motion_envs.data.skeleton_maps import UnknownSkeletonError, match_skeleton
 from motion_envs.data.splits import split_of
 
 CACHE_CODE = (
-    "data/amass.py", "data/asf_amc.py", "data/build.py", "data/bvh.py", "data/canonical.py",
+    "data/amass.py", "data/asf_amc.py", "data/build.py", "data/bvh.py", "data/canonical.py", "data/cleanup.py",
     "data/motion.py", "data/resample.py", "data/retarget.py", "data/skeleton_maps.py",
     "data/splits.py", "body/frames.py", "body/markers.py", "body/skeleton.py",
 )  # fmt: skip
@@ -43,7 +49,8 @@ MAX_EXTENT = 1000.0
 kilometre holds garbage (a BVH of 1e300 offsets once became inf in the cache)."""
 DEFAULT_FPS = (30, 40)
 """WANDR runs at 30 fps, GAMMA at 40 fps."""
-CACHE_FORMAT = 1
+CACHE_FORMAT = 2
+"""2: per-frame contacts and per-clip cleanup figures."""
 
 
 @dataclass(frozen=True)
@@ -97,9 +104,10 @@ def _asf_for(amc: Path) -> Path | None:
     return max(candidates, key=lambda p: len(p.stem)) if candidates else None
 
 
-def content_hash(sources: list[ClipSource], fps: int, retarget_config: RetargetConfig) -> str:
+def content_hash(sources: list[ClipSource], fps: int, retarget_config: RetargetConfig,
+                 cleanup: CleanupConfig | None = CleanupConfig()) -> str:  # fmt: skip
     """sha256 over the source bytes, `CACHE_CODE`, mannequin-x's version and the settings."""
-    digest = hashlib.sha256(f"{CACHE_FORMAT}|{fps}|{retarget_config}|{version('mannequin-x')}".encode())
+    digest = hashlib.sha256(f"{CACHE_FORMAT}|{fps}|{retarget_config}|{cleanup}|{version('mannequin-x')}".encode())
     package = Path(__file__).resolve().parents[1]
     for code in CACHE_CODE:
         digest.update((package / code).read_bytes())
@@ -111,24 +119,36 @@ def content_hash(sources: list[ClipSource], fps: int, retarget_config: RetargetC
     return digest.hexdigest()
 
 
-def load_clip(source: ClipSource, fps: int, body: BodyModel, retarget_config: RetargetConfig) -> BodyMotion:
-    """Read, resample, retarget (for skeletal mocap) and canonicalise one clip."""
+def load_clip(source: ClipSource, fps: int, body: BodyModel, retarget_config: RetargetConfig,
+              cleanup: CleanupConfig | None = CleanupConfig()) -> BodyMotion:  # fmt: skip
+    """Read, resample, retarget (for skeletal mocap), clean (unless `cleanup` is None) and canonicalise one clip.
+
+    `info` gains `retarget_error` (T, 22) and, when cleaned, `contacts` (T, 4), `cleanup_shift` (T, 22) and
+    `lock_residual` (T, 4) (see `motion_envs.data.cleanup.CleanupResult`)."""
     name = Path(source.relative).with_suffix("").as_posix()
     if source.path.suffix.lower() == ".npz":
         motion = resample_body(read_amass_npz(source.path, subject=source.subject), fps)
         motion.info["retarget_error"] = np.zeros((motion.num_frames, 22))
-        return canonicalise(motion, body)
-    if source.path.suffix.lower() == ".amc":
-        if source.skeleton is None:
-            raise MocapFormatError(source.path, None, "no .asf skeleton beside it whose name prefixes it")
-        captured = read_amc(source.path, read_asf(source.skeleton))
     else:
-        captured = read_bvh(source.path)
-    mapping = match_skeleton(captured.skeleton.names, str(source.path))
-    captured = captured.frames(mapping.leading_frames_to_skip)
-    result = retarget(resample_source(captured, fps), mapping, body, name, source.subject, retarget_config)
-    result.motion.info["retarget_error"] = result.joint_error
-    return canonicalise(result.motion, body)
+        if source.path.suffix.lower() == ".amc":
+            if source.skeleton is None:
+                raise MocapFormatError(source.path, None, "no .asf skeleton beside it whose name prefixes it")
+            captured = read_amc(source.path, read_asf(source.skeleton))
+        else:
+            captured = read_bvh(source.path)
+        mapping = match_skeleton(captured.skeleton.names, str(source.path))
+        captured = captured.frames(mapping.leading_frames_to_skip)
+        result = retarget(resample_source(captured, fps), mapping, body, name, source.subject, retarget_config)
+        motion = result.motion
+        motion.info["retarget_error"] = result.joint_error
+    if cleanup is None:
+        motion.info["contacts"] = np.zeros((motion.num_frames, len(SOLE_POINTS)), dtype=bool)
+        return canonicalise(motion, body)
+    check_plausible(motion, source.relative)  # garbage (inf, 1e300) is refused before cleanup computes on it
+    cleaned = clean(motion, body, cleanup)
+    cleaned.motion.info.update(contacts=cleaned.contacts, cleanup_shift=cleaned.joint_shift,
+                               lock_residual=cleaned.lock_residual)  # fmt: skip
+    return canonicalise(cleaned.motion, body, ground_first_frame=False)  # cleanup put the floor at z = 0
 
 
 def check_plausible(motion: BodyMotion, relative: str) -> None:
@@ -158,8 +178,9 @@ def build(
     fps_list: tuple[int, ...] = DEFAULT_FPS,
     retarget_config: RetargetConfig = RetargetConfig(),
     progress: bool = True,
+    cleanup: CleanupConfig | None = CleanupConfig(),
 ) -> BuildReport:
-    """Build (or find) the cache for each frame rate."""
+    """Build (or find) the cache for each frame rate; `cleanup=None` skips the cleanup."""
     mocap_dir = mocap_dir or default_mocap_dir()
     if mocap_dir is None:
         raise FileNotFoundError("no mocap folder: pass --mocap-dir or set MOTION_ENVS_DATA")
@@ -171,7 +192,7 @@ def build(
     report = BuildReport()
     body = BodyModel()
     for fps in fps_list:
-        path = cache_dir / f"motion_{fps}fps_{content_hash(sources, fps, retarget_config)[:16]}.npz"
+        path = cache_dir / f"motion_{fps}fps_{content_hash(sources, fps, retarget_config, cleanup)[:16]}.npz"
         report.caches[fps] = path
         if path.exists():
             continue
@@ -180,7 +201,7 @@ def build(
         failures: list[str] = []
         for source in tqdm(sources, desc=f"retarget @ {fps} fps", disable=not progress, unit="clip"):
             try:
-                motion = load_clip(source, fps, body, retarget_config)
+                motion = load_clip(source, fps, body, retarget_config, cleanup)
                 check_plausible(motion, source.relative)
                 clips.append((source, motion))
             except Exception as error:  # one bad file must not abort the build: report it, build the rest
@@ -189,16 +210,18 @@ def build(
                 tqdm.write(f"skipped {source.relative}: {reason}", file=sys.stderr)
         if not clips:
             raise RuntimeError(f"every clip under {mocap_dir} failed ({len(failures)}):\n  {_failure_summary(failures)}")
-        _write_cache(path, clips, failures, fps, mocap_dir)
+        _write_cache(path, clips, failures, fps, mocap_dir, cleanup)
         report.failures = failures
     report.clips = len(sources) - len(report.failures)
     return report
 
 
 def _write_cache(path: Path, clips: list[tuple[ClipSource, BodyMotion]], failures: list[str], fps: int,
-                 mocap_dir: Path) -> None:  # fmt: skip
+                 mocap_dir: Path, cleanup: CleanupConfig | None) -> None:  # fmt: skip
     motions = [motion for _, motion in clips]
     errors = [motion.info["retarget_error"] for motion in motions]
+    shifts = [motion.info.get("cleanup_shift", np.zeros((motion.num_frames, 22))) for motion in motions]
+    residuals = [motion.info.get("lock_residual", np.full((motion.num_frames, 4), np.nan)) for motion in motions]
     arrays = {
         "format": np.array(CACHE_FORMAT),
         "fps": np.array(fps),
@@ -214,6 +237,12 @@ def _write_cache(path: Path, clips: list[tuple[ClipSource, BodyMotion]], failure
         "retarget_error_mean": np.array([np.nanmean(e) for e in errors]),
         "retarget_error_p95": np.array([np.nanpercentile(e, 95) for e in errors]),
         "retarget_error_max": np.array([np.nanmax(e) for e in errors]),
+        "contacts": np.concatenate([m.info["contacts"] for m in motions]),
+        "contact_points": np.array(SOLE_POINTS),
+        "cleanup": np.array(str(cleanup)),
+        "cleanup_shift_mean": np.array([s.mean() for s in shifts]),
+        "cleanup_shift_max": np.array([s.max() for s in shifts]),
+        "lock_residual_max": np.array([np.nanmax(r, initial=0.0) for r in residuals]),
         "failures": np.array(failures, dtype=str),
         "mocap_dir": np.array(str(mocap_dir)),
     }

@@ -37,9 +37,10 @@ def facing_angle(joints: np.ndarray) -> np.ndarray:
     return np.arctan2(-forward[..., 0], forward[..., 1])
 
 
-def canonicalise(motion: BodyMotion, body: BodyModel) -> BodyMotion:
-    """Lowest foot point on z = 0 in the first frame; first-frame pelvis at the xy
-    origin, facing +y (GAMMA's canonical frame: x = right hip − left hip, z up)."""
+def canonicalise(motion: BodyMotion, body: BodyModel, ground_first_frame: bool = True) -> BodyMotion:
+    """First-frame pelvis at the xy origin, facing +y (GAMMA's canonical frame: x = right hip − left hip, z up),
+    and with `ground_first_frame` the first frame's lowest foot point on z = 0 (for motion whose floor is
+    unknown; cleaned motion already has its floor at z = 0 and keeps its height)."""
     with torch.no_grad():
         first = body(*(t[:1] for t in body_tensors(motion))).joints[0].numpy()
     angle = facing_angle(first)
@@ -50,6 +51,8 @@ def canonicalise(motion: BodyMotion, body: BodyModel) -> BodyMotion:
         torch.as_tensor(turn) @ roma.rotvec_to_rotmat(torch.as_tensor(motion.global_orient, dtype=torch.float64))
     ).numpy()
     turned = replace(motion, transl=transl, global_orient=orient)
+    if not ground_first_frame:
+        return turned
     first_frame = replace(turned, transl=transl[:1], global_orient=orient[:1], body_pose=motion.body_pose[:1])
     ground = lowest_foot_points(first_frame, body)[0, 2]
     return replace(turned, transl=transl - np.array([0.0, 0.0, ground]))

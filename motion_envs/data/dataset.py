@@ -45,7 +45,7 @@ class MotionDataset:
             transl=self.arrays["transl"][start:stop],
             global_orient=self.arrays["global_orient"][start:stop],
             body_pose=self.arrays["body_pose"][start:stop],
-            info={"split": str(self.arrays["clip_split"][index])},
+            info={"split": str(self.arrays["clip_split"][index]), "contacts": self.arrays["contacts"][start:stop]},
         )
 
     def clips(self, split: str | None = None, mirrored: bool = False) -> list[BodyMotion]:

@@ -19,10 +19,15 @@ _FLIP = np.array([1.0, -1.0, -1.0])
 
 
 def mirror(motion: BodyMotion) -> BodyMotion:
-    """The mirrored motion (mirroring twice gives the original back exactly)."""
+    """The mirrored motion (mirroring twice gives the original back exactly); sole contacts (`info["contacts"]`,
+    `SOLE_POINTS` order: left heel, left toe, right heel, right toe) swap sides too."""
     pose = motion.body_pose[:, [j - 1 for j in MIRROR_JOINTS[1:]]] * _FLIP
+    info = dict(motion.info)
+    if "contacts" in info:
+        info["contacts"] = info["contacts"][:, [2, 3, 0, 1]]
     return replace(
         motion,
+        info=info,
         name=f"{motion.name}_mirrored",
         transl=motion.transl * np.array([-1.0, 1.0, 1.0]),
         global_orient=motion.global_orient * _FLIP,

@@ -24,3 +24,9 @@ def default_mocap_dir() -> Path | None:
 def default_cache_dir() -> Path:
     """`$MOTION_ENVS_CACHE`, else `~/.cache/motion_envs`."""
     return Path(os.environ.get(CACHE_ENV_VAR, Path.home() / ".cache" / "motion_envs")).expanduser()
+
+
+SHIPPED_SUBSETS: tuple[str, ...] = ("cmu", "cmu_extra", "accad")
+"""The mocap subfolders the shipped weights train on (CMU in both formats and ACCAD, whose licences allow
+shipping weights; HDM05 is share-alike and stays for ablations), where the mocap folder has them."""
+

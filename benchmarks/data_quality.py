@@ -1,15 +1,20 @@
 """Data quality benchmark (`motion-envs bench data`).
 
-Writes `benchmarks/results/data_quality.md` and `data_quality_retarget.png`:
-clips, subjects and minutes per split; retargeting error; the data's own foot
-skating at 30 fps by WANDR's definition (the "ground truth" FS later tables
-compare with); BVH reader speed against bvhio; FK + marker throughput against
-mannequin-x's numpy `joint_transforms`.
+Writes `benchmarks/results/data_quality.md`, `data_quality_retarget.png` and
+`data_quality_feet.png`: clips, subjects and minutes per split; the data before
+and after cleanup (`motion_envs.data.cleanup`) per split, by WANDR's FS and the
+contact-aware FS (`metrics.loaded_foot_skating`), stance-ankle speed, GAMMA's
+contact score, how far cleanup moved the joints and how still the locked points
+hold; the same for clean-capture references (HDM05, CMU 35_01), raw, retargeted
+and cleaned; retargeting error; BVH reader speed against bvhio; FK + marker
+throughput against mannequin-x's numpy `joint_transforms`.
 """
 
 from __future__ import annotations
 
+import re
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import matplotlib
@@ -20,6 +25,7 @@ import mannequin  # noqa: E402
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 from torch.utils import benchmark  # noqa: E402
+from tqdm import tqdm  # noqa: E402
 
 from benchmarks.machine import machine_line  # noqa: E402
 from motion_envs.atomic import atomic_write  # noqa: E402
@@ -34,8 +40,15 @@ from motion_envs.data.resample import resample_source  # noqa: E402
 from motion_envs.data.retarget import RetargetConfig, retarget  # noqa: E402
 from motion_envs.data.skeleton_maps import match_skeleton  # noqa: E402
 from motion_envs.data.splits import SPLITS  # noqa: E402
-from motion_envs.metrics import foot_skating  # noqa: E402
+from motion_envs.body.frames import Y_UP_TO_Z_UP  # noqa: E402
+from motion_envs.body.markers import sole_vertex_ids  # noqa: E402
+from motion_envs.data.asf_amc import read_amc, read_asf  # noqa: E402
+from motion_envs.data.build import find_sources, load_clip  # noqa: E402
+from motion_envs.data.cleanup import CleanupConfig  # noqa: E402
+from motion_envs.data.motion import BodyMotion  # noqa: E402
+from motion_envs.metrics import contact_score, foot_skating, loaded_foot_skating, stance_ankle_speed  # noqa: E402
 from motion_envs.plots import save  # noqa: E402
+from motion_envs.data.paths import SHIPPED_SUBSETS  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 FK_BATCH = 4096
@@ -95,16 +108,120 @@ def reader_speed(mocap_dir: Path, names: tuple[str, ...] = ("cmu/07_01.bvh", "cm
     return rows
 
 
-def skating_by_clip(dataset: MotionDataset, body: BodyModel) -> np.ndarray:
-    """(C,) FS of each clip (fraction of frame transitions that skate)."""
-    feet_ids = foot_vertex_ids()
-    values = []
+REFERENCES = {
+    "HDM05 jogging, actor bk (clean capture)": "hdm05/HDM_bk_jog",
+    "HDM05, all 93 clips (clean capture)": "hdm05/",
+    "CMU 35_01 walk, original ASF/AMC (clean capture)": "cmu_extra/35/35_01",
+    "CMU Daz-friendly walks (07, 08)": "cmu/0[78]_",
+}
+"""Reference sets for the cleanup table: label -> a regex on the clip's file path."""
+WALKS = r"cmu/0[78]_"
+"""CMU subjects 07 and 08: walks (the stance-ankle speed row of the issue)."""
+
+
+@dataclass
+class MotionFigures:
+    """Per-clip measures: FS (WANDR), contact-aware FS, stance-ankle speed (m/s), GAMMA contact score, frames."""
+
+    wandr_fs: float
+    loaded_fs: float
+    ankle_speed: float
+    contact: float
+    frames: int
+
+
+def motion_figures(motion: BodyMotion, body: BodyModel) -> MotionFigures:
+    """The measures of one clip of body motion (floor at z = 0 for the contact score)."""
     with torch.inference_mode():
-        for index in dataset.clip_ids():
-            clip = dataset.clip(index)
-            feet = body.skin(body(*body_tensors(clip)), feet_ids)
-            values.append(foot_skating(feet).float().mean().item())
-    return np.array(values)
+        pose = body(*body_tensors(motion))
+        feet = body.skin(pose, foot_vertex_ids())
+        soles = body.skin(pose, sole_vertex_ids())
+        markers = body.skin(pose, marker_ids())
+        windows = markers[: len(markers) // 10 * 10].reshape(-1, 10, *markers.shape[1:])
+        contact = contact_score(windows, motion.fps).mean().item() if len(windows) else float("nan")
+        return MotionFigures(foot_skating(feet).float().mean().item(),
+                             loaded_foot_skating(soles, motion.fps).float().mean().item(),
+                             stance_ankle_speed(pose.joints[:, [7, 8]], motion.fps).item(), contact, motion.num_frames)  # fmt: skip
+
+
+def source_figures(path: Path, skeleton: Path | None) -> MotionFigures:
+    """Raw-source measures at 30 fps on its own joints (ankle and toe joints stand in for heel and toe)."""
+    captured = read_amc(path, read_asf(skeleton)) if skeleton else read_bvh(path)
+    mapping = match_skeleton(captured.skeleton.names, str(path))
+    source = resample_source(captured.frames(mapping.leading_frames_to_skip), 30)
+    positions = source.global_transforms()[0] * source.metres_per_unit @ Y_UP_TO_Z_UP.T
+    names = source.skeleton.names
+    soles = torch.as_tensor(positions[:, [names.index(mapping.joints[j]) for j in ("left_ankle", "left_foot", "right_ankle", "right_foot")]])
+    return MotionFigures(float("nan"), loaded_foot_skating(soles, 30).float().mean().item(),
+                         stance_ankle_speed(soles[:, [0, 2]], 30).item(), float("nan"), source.num_frames)  # fmt: skip
+
+
+def weighted(figures: list[MotionFigures], field: str) -> float:
+    """Frame-weighted mean of one measure (the median for the stance-ankle speed) over clips."""
+    values = np.array([getattr(f, field) for f in figures])
+    if field == "ankle_speed":
+        return float(np.nanmedian(values)) if len(values) else float("nan")
+    frames = np.array([f.frames for f in figures], dtype=float)
+    keep = np.isfinite(values)
+    return float(np.sum(values[keep] * frames[keep]) / frames[keep].sum()) if keep.any() else float("nan")
+
+
+def figures_by_clip(dataset: MotionDataset, body: BodyModel) -> list[MotionFigures]:
+    return [motion_figures(dataset.clip(index), body) for index in tqdm(dataset.clip_ids(), desc="measure", unit="clip")]
+
+
+def cleanup_rows(clean: MotionDataset, raw: MotionDataset, body: BodyModel) -> list[str]:
+    """Per split: the measures before and after cleanup, and what cleanup moved."""
+    after, before = figures_by_clip(clean, body), figures_by_clip(raw, body)
+    arrays = clean.arrays
+    rows = []
+    groups = {split: clean.clip_ids(split) for split in SPLITS} | {"all": clean.clip_ids()}
+    walks = [i for i in clean.clip_ids() if re.match(WALKS, str(arrays["clip_file"][i]))]
+    for label, ids in (*groups.items(), ("CMU walks (07, 08)", walks)):
+        if not ids:
+            continue
+        pick = lambda figures: [figures[i] for i in ids]  # noqa: E731
+        cells = [f"{weighted(pick(before), f):.3f} → {weighted(pick(after), f):.3f}" for f in ("wandr_fs", "loaded_fs", "ankle_speed", "contact")]
+        shift = arrays["cleanup_shift_mean"][ids] * 100
+        rows.append(f"| {label} | {len(ids)} | {' | '.join(cells)} | {np.average(shift, weights=[after[i].frames for i in ids]):.2f} / "
+                    f"{arrays['cleanup_shift_max'][ids].max() * 100:.1f} | {np.median(arrays['lock_residual_max'][ids]) * 100:.2f} / "
+                    f"{arrays['lock_residual_max'][ids].max() * 100:.1f} | {arrays['retarget_error_mean'][ids].mean() * 100:.2f} |")  # fmt: skip
+    return rows
+
+
+def reference_rows(mocap_dir: Path, body: BodyModel) -> list[str]:
+    """Clean-capture references and the Daz walks: raw source, retargeted, retargeted and cleaned."""
+    sources = find_sources(mocap_dir)
+    rows = []
+    for label, pattern in REFERENCES.items():
+        chosen = [s for s in sources if re.match(pattern, s.relative)]
+        raw = [source_figures(s.path, s.skeleton) for s in chosen]
+        retargeted = [motion_figures(load_clip(s, 30, body, RetargetConfig(), None), body) for s in tqdm(chosen, desc=label[:20])]
+        cleaned = [motion_figures(load_clip(s, 30, body, RetargetConfig(), CleanupConfig()), body) for s in tqdm(chosen, desc=label[:20])]
+        for stage, figures in (("raw source joints", raw), ("retargeted", retargeted), ("retargeted + cleanup", cleaned)):
+            cells = " | ".join("–" if np.isnan(weighted(figures, f)) else f"{weighted(figures, f):.3f}" for f in ("wandr_fs", "loaded_fs", "ankle_speed", "contact"))
+            rows.append(f"| {label} | {len(chosen)} | {stage} | {cells} |")
+    return rows
+
+
+def feet_figure(raw: MotionDataset, clean: MotionDataset, body: BodyModel, destination: Path, clip: str = "cmu/08_11") -> None:
+    """One walk's sole points before and after cleanup: top view of the paths, heights over time."""
+    figure, axes = plt.subplots(1, 3, figsize=(15, 4.5))
+    for dataset, style, label in ((raw, ":", "before"), (clean, "-", "after")):
+        motion = dataset.clip({str(n): i for i, n in enumerate(dataset.arrays["clip_name"])}[clip])
+        with torch.inference_mode():
+            soles = body.skin(body(*body_tensors(motion)), sole_vertex_ids()).numpy()
+        time = np.arange(len(soles)) / dataset.fps
+        for point, color in ((0, "tab:blue"), (1, "tab:cyan"), (2, "tab:red"), (3, "tab:orange")):
+            axes[0].plot(soles[:, point, 0], soles[:, point, 1], style, color=color, lw=1.2)
+            axes[1].plot(time, soles[:, point, 2] * 100, style, color=color, lw=1.2, label=f"{label} {'LLRR'[point]} {'heel toe'.split()[point % 2]}")
+            speed = np.linalg.norm(np.gradient(soles[:, point, :2], axis=0), axis=-1) * dataset.fps
+            axes[2].plot(time, speed, style, color=color, lw=1.0)
+    axes[0].set(title=f"{clip}: sole paths, top view (dotted before, solid after)", xlabel="x (m)", ylabel="y (m)", aspect="equal")
+    axes[1].set(title="sole point height (cm)", xlabel="s", ylim=(-5, 25))
+    axes[1].legend(fontsize=6, ncol=2)
+    axes[2].set(title="horizontal speed (m/s)", xlabel="s", ylim=(0, 3))
+    save(figure, destination, dpi=90)
 
 
 def retarget_figure(mocap_dir: Path, destination: Path) -> None:
@@ -136,36 +253,59 @@ def retarget_figure(mocap_dir: Path, destination: Path) -> None:
     save(figure, destination, dpi=90)
 
 
-def main(mocap_dir: Path | None = None, cache_dir: Path | None = None, subsets: tuple[str, ...] = ("cmu",)) -> int:
+def main(mocap_dir: Path | None = None, cache_dir: Path | None = None, subsets: tuple[str, ...] = SHIPPED_SUBSETS) -> int:
     mocap_dir = Path(mocap_dir or default_mocap_dir() or "")
     RESULTS.mkdir(parents=True, exist_ok=True)
     report = build(mocap_dir=mocap_dir, cache_dir=cache_dir, subsets=subsets)
+    raw_report = build(mocap_dir=mocap_dir, cache_dir=cache_dir, subsets=subsets, fps_list=(30,), cleanup=None)
     dataset = MotionDataset.load(report.caches[30])
+    raw = MotionDataset.load(raw_report.caches[30])
     body = BodyModel()
-    skating = skating_by_clip(dataset, body)
     arrays = dataset.arrays
     lengths = np.diff(arrays["clip_start"]) / dataset.fps
     lines = [
         "# Data quality",
         "",
-        f"Command: `motion-envs bench data --subset {' --subset '.join(subsets)}`. {machine_line()}",
-        f"Source: `{mocap_dir}` subsets {list(subsets)}; cache `{report.caches[30].name}`. "
-        f"{len(report.failures)} clips skipped.",
+        f"Command: `motion-envs bench data`. {machine_line()}",
+        f"Source: `{mocap_dir}` subsets {list(subsets)}; cache `{report.caches[30].name}` (uncleaned: "
+        f"`{raw_report.caches[30].name}`). {len(report.failures)} clips skipped.",
         "",
         "## Splits (30 fps cache)",
         "",
-        "| split | clips | subjects | minutes | FS (WANDR, 30 fps) |",
-        "|---|---|---|---|---|",
+        "| split | clips | subjects | minutes |",
+        "|---|---|---|---|",
     ]
     for split in SPLITS:
         ids = dataset.clip_ids(split)
-        frames = np.diff(arrays["clip_start"])[ids]
-        fs = float(np.sum(skating[ids] * (frames - 1)) / np.sum(frames - 1)) if ids else float("nan")
         subjects = sorted(set(arrays["clip_subject"][ids]))
-        lines.append(f"| {split} | {len(ids)} | {', '.join(subjects)} | {lengths[ids].sum() / 60:.2f} | {fs:.3f} |")
-    frames = np.diff(arrays["clip_start"])
-    overall = float(np.sum(skating * (frames - 1)) / np.sum(frames - 1))
-    lines.append(f"| all | {len(frames)} | {len(set(arrays['clip_subject']))} | {lengths.sum() / 60:.2f} | {overall:.3f} |")
+        lines.append(f"| {split} | {len(ids)} | {', '.join(subjects)} | {lengths[ids].sum() / 60:.2f} |")
+    lines.append(f"| all | {len(lengths)} | {len(set(arrays['clip_subject']))} | {lengths.sum() / 60:.2f} |")
+    lines += [
+        "",
+        "## Cleanup: before → after, per split (30 fps)",
+        "",
+        "| clips | n | FS (WANDR) | contact-aware FS | stance-ankle speed (m/s, median of clips) | GAMMA contact score "
+        "| joints moved, cm (mean / max) | locked point drift, cm (median clip / worst clip) | retarget error (cm) |",
+        "|---|---|---|---|---|---|---|---|---|",
+        *cleanup_rows(dataset, raw, body),
+        "",
+        "## References: clean capture and the Daz walks (30 fps)",
+        "",
+        "| set | clips | stage | FS (WANDR) | contact-aware FS | stance-ankle speed (m/s) | GAMMA contact score |",
+        "|---|---|---|---|---|---|---|",
+        *reference_rows(mocap_dir, body),
+        "",
+        "FS (WANDR): fraction of frame transitions in which the lowest foot vertex moves more than 0.66 cm",
+        "horizontally by the next frame (no height gating). Contact-aware FS (`metrics.loaded_foot_skating`): the",
+        "lowest of the four sole points (heel, toe of each foot) is within 2.5 cm of the local floor (the lowest",
+        "sole point within ±0.5 s) at both frames and moves faster than 0.2 m/s. On the raw sources the ankle and",
+        "toe joints stand in for heel and toe (joints sit above the sole, so raw and body figures compare only",
+        "roughly). Stance-ankle speed: the lower ankle's horizontal speed while it stays the lower one (median).",
+        "GAMMA's contact score (Eq. 11) over 10-frame windows with the floor at z = 0 (retargeted-only clips keep",
+        "the first frame's floor). Locked point drift: per clip the largest distance of a contact point from its",
+        "lock target during a labelled contact. Joints moved: by foot locking (the floor levelling is a rigid",
+        "turn of the whole clip and not counted). Figure: `data_quality_feet.png`.",
+    ]
     errors = arrays["retarget_error_mean"] * 100
     worst = int(np.argmax(errors))
     lines += [
@@ -206,6 +346,7 @@ def main(mocap_dir: Path | None = None, cache_dir: Path | None = None, subsets: 
     text = "\n".join(lines) + "\n"
     atomic_write(RESULTS / "data_quality.md", lambda file: file.write(text.encode()))
     retarget_figure(mocap_dir, RESULTS / "data_quality_retarget.png")
+    feet_figure(raw, dataset, body, RESULTS / "data_quality_feet.png")
     print(text)
     return 0
 

@@ -48,7 +48,7 @@ from motion_envs.body.markers import foot_vertex_ids
 from motion_envs.data.primitives import GAMMA_FPS
 from motion_envs.envs.gamma_reach import GammaReachConfig, GammaReachCore, GammaReachState, GammaStepResult
 from motion_envs.metrics import foot_skating, skating_threshold
-from motion_envs.priors.canonical import PELVIS
+from motion_envs.body.canonical_frame import PELVIS
 from motion_envs.priors.training import WEIGHTS_DIR
 from motion_envs.wrappers.tree_search import SearchCost, SearchSettings, beam_search
 

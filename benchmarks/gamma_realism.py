@@ -31,9 +31,10 @@ from motion_envs.data.dataset import MotionDataset
 from motion_envs.data.primitives import GAMMA_FPS, PRIMITIVE_FRAMES
 from motion_envs.data.start_poses import load_start_poses
 from motion_envs.metrics import contact_score, foot_skating, skating_threshold
-from motion_envs.priors.canonical import PELVIS
+from motion_envs.body.canonical_frame import PELVIS
 from motion_envs.priors.gamma_generator import GammaGenerator
 from motion_envs.priors.training import WEIGHTS_DIR
+from motion_envs.data.paths import SHIPPED_SUBSETS
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -102,7 +103,7 @@ def random_motion(gamma: GammaGenerator, rollouts: int, primitives: int, seed: i
     return {name: torch.cat(values, dim=1) for name, values in pieces.items()}
 
 
-def main(mocap_dir: Path | None = None, cache_dir: Path | None = None, subsets: tuple[str, ...] = ("cmu",),
+def main(mocap_dir: Path | None = None, cache_dir: Path | None = None, subsets: tuple[str, ...] = SHIPPED_SUBSETS,
          rollouts: int = 10, primitives: int = 20, seed: int = 0) -> int:  # fmt: skip
     began = time.perf_counter()
     body, gamma = BodyModel(), GammaGenerator.load()

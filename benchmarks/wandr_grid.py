@@ -83,6 +83,7 @@ from motion_envs.priors.training import WEIGHTS_DIR
 from motion_envs.priors.wandr import WandrStepper
 from motion_envs.priors.wandr_features import FPS
 from motion_envs.plots import plt, save, success_by
+from motion_envs.data.paths import SHIPPED_SUBSETS
 
 RESULTS = Path(__file__).resolve().parent / "results"
 ANGLES, HEIGHTS, DISTANCES = 5, 5, 5
@@ -159,7 +160,7 @@ def optimisation_row(prior_path: Path, intentions: tuple[str, ...] | None, seed:
     return {**row, "seconds": row["seconds"] + seconds}
 
 
-def motion_30fps(subsets: tuple[str, ...] = ("cmu",)) -> MotionDataset | None:
+def motion_30fps(subsets: tuple[str, ...] = SHIPPED_SUBSETS) -> MotionDataset | None:
     """The 30 fps `MotionDataset`, or None (said why) when the mocap cache cannot be built here."""
     from motion_envs.data.build import build
 
@@ -178,7 +179,7 @@ def training_clips() -> WandrClips | None:
     return None if dataset is None else WandrClips.from_dataset(dataset, "train", BodyModel(), mirrored=True)
 
 
-def data_skating(subsets: tuple[str, ...] = ("cmu",)) -> float | None:
+def data_skating(subsets: tuple[str, ...] = SHIPPED_SUBSETS) -> float | None:
     """FS (%) of the test clips at 30 fps, or None when the mocap cache cannot be built here."""
     from motion_envs.body import BodyModel
     from motion_envs.body.markers import foot_vertex_ids

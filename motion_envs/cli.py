@@ -7,9 +7,12 @@ import json
 import sys
 from pathlib import Path
 
+from motion_envs.data.paths import SHIPPED_SUBSETS
+
 
 def _data_build(args: argparse.Namespace) -> int:
     from motion_envs.data.build import build
+    from motion_envs.data.cleanup import CleanupConfig
 
     report = build(
         mocap_dir=args.mocap_dir,
@@ -17,6 +20,7 @@ def _data_build(args: argparse.Namespace) -> int:
         subsets=_subsets(args),
         fps_list=tuple(args.fps),
         progress=not args.quiet,
+        cleanup=None if args.no_cleanup else CleanupConfig(),
     )
     state = "built" if report.rebuilt else "up to date"
     for fps, path in report.caches.items():
@@ -72,6 +76,12 @@ def _bench_wandr_pace(args: argparse.Namespace) -> int:
     from motion_envs.priors.training import WEIGHTS_DIR
 
     return wandr_pace(args.weights or [WEIGHTS_DIR / "wandr.pt"])
+
+
+def _bench_floor(args: argparse.Namespace) -> int:
+    from benchmarks.floor import main as floor
+
+    return floor(steps=args.steps, seed=args.seed)
 
 
 def _bench_speed(args: argparse.Namespace) -> int:
@@ -209,7 +219,19 @@ def _env_option(option: str) -> tuple[str, object]:
         return key, value
 
 
+def _train_priors(args: argparse.Namespace) -> int:
+    from motion_envs.priors.recipe import train_priors
+
+    data_args = [*(["--mocap-dir", str(args.mocap_dir)] if args.mocap_dir else []),
+                 *(["--cache-dir", str(args.cache_dir)] if args.cache_dir else []),
+                 *[word for name in (args.subset or []) for word in ("--subset", name)]]  # fmt: skip
+    stages = args.stages.split(",") if args.stages else None
+    return train_priors(stages, Path(args.run_dir or "runs/priors"), args.ship, data_args)
+
+
 def _train(args: argparse.Namespace) -> int:
+    if args.what == "priors":
+        return _train_priors(args)
     if args.what == "ppo":
         return _train_ppo(args)
     if args.what == "wandr":
@@ -225,7 +247,8 @@ def _train(args: argparse.Namespace) -> int:
         return 2
     dataset = _gamma_dataset(args)
     given = {"epochs": args.epochs, "batch_size": args.batch_size, "run_dir": args.run_dir, "weights": args.weights,
-             "window_stride": args.window_stride, "rollout_epochs": args.rollout_epochs, "ship": args.ship or None}  # fmt: skip
+             "window_stride": args.window_stride, "rollout_epochs": args.rollout_epochs, "ship": args.ship or None,
+             "contact_weight": args.contact_weight}  # fmt: skip
     common = {"data_hash": dataset.path.stem, "command": "motion-envs " + " ".join(sys.argv[1:]),
               **{name: value for name, value in given.items() if value is not None}}  # fmt: skip
     entry = stages[args.stage](args, dataset, common)
@@ -255,7 +278,7 @@ def _train_wandr(args: argparse.Namespace) -> int:
     from motion_envs.priors.training import weights_destination
     from motion_envs.priors.wandr import WandrConfig
 
-    subsets = _subsets(args)  # `--subset hdm05` adds to the default cmu
+    subsets = _subsets(args)  # `--subset hdm05` adds to the default SHIPPED_SUBSETS
     dataset, train_clips, validation_clips = _delta_prior_clips(args)
     intentions = tuple(args.intentions.split(",")) if args.intentions else WandrConfig().intentions
     model = WandrConfig(intentions=intentions, learned_prior=args.learned_prior, **({"layers": args.layers} if args.layers else {}))
@@ -265,7 +288,7 @@ def _train_wandr(args: argparse.Namespace) -> int:
              "seed": args.seed, "max_rollout": args.max_rollout, "kl_weight": args.kl_weight,
              "late_kl_weight": args.late_kl_weight, "kl_raise_epoch": args.kl_raise_epoch,
              "weights": weights_destination(name, run_dir, args.weights, args.ship), "run_dir": run_dir, "init": _prior_init(args),
-             "far_goal_probability": args.far_goal_probability}  # fmt: skip
+             "far_goal_probability": args.far_goal_probability, "contact_weight": args.contact_weight}  # fmt: skip
     config = WandrTrainConfig(model=model, data_hash=dataset.path.stem, command="motion-envs " + " ".join(sys.argv[1:]),
                               **{key: value for key, value in given.items() if value is not None})  # fmt: skip
     entry = train_wandr(config, train_clips, validation_clips)
@@ -289,7 +312,7 @@ def _train_clops(args: argparse.Namespace) -> int:
     model = ClopsConfig(**{name: value for name, value in (("layers", args.layers), ("actions", args.actions)) if value})
     given = {"epochs": args.epochs, "batch_size": args.batch_size, "window_stride": args.window_stride, "seed": args.seed,
              "max_rollout": args.max_rollout, "kl_weight": args.kl_weight, "weights": args.weights, "run_dir": args.run_dir,
-             "ship": args.ship or None}  # fmt: skip
+             "ship": args.ship or None, "contact_weight": args.contact_weight}  # fmt: skip
     if args.prior_init is not None:
         given["init"] = _prior_init(args)
     config = ClopsTrainConfig(model=model, data_hash=dataset.path.stem, command="motion-envs " + " ".join(sys.argv[1:]),
@@ -377,7 +400,7 @@ def _add_data_args(parser: argparse.ArgumentParser, default_subsets: list[str] |
 
 
 def _subsets(args: argparse.Namespace) -> tuple[str, ...]:
-    """The mocap subfolders a command reads: its default subfolders (cmu) that the mocap folder has, then every
+    """The mocap subfolders a command reads: its default subfolders (`SHIPPED_SUBSETS`) that the mocap folder has, then every
     `--subset`; empty: the whole folder. `--mocap-dir` so means one thing for every command, the folder holding the
     clips, with or without a cmu/ subfolder."""
     from motion_envs.data.paths import default_mocap_dir
@@ -399,13 +422,18 @@ def parser() -> argparse.ArgumentParser:
     _add_data_args(build, None)
     build.add_argument("--fps", type=int, nargs="+", default=[30, 40])
     build.add_argument("--quiet", action="store_true", help="no progress bar")
+    build.add_argument("--no-cleanup", action="store_true",
+                       help="skip foot contacts, floor levelling and foot locking (to compare; its own cache)")  # fmt: skip
     build.set_defaults(run=_data_build)
     starts = data.add_parser("start-poses", help="write the shipped start poses from validation clips")
-    _add_data_args(starts, ["cmu"])
+    _add_data_args(starts, list(SHIPPED_SUBSETS))
     starts.set_defaults(run=_data_start_poses)
 
     train = commands.add_parser("train", help="train a prior or a policy (resumable: rerun the same command)")
-    train.add_argument("what", choices=("gamma", "ppo", "wandr", "clops", "dqn"), help="what to train")
+    train.add_argument("what", choices=("gamma", "ppo", "wandr", "clops", "dqn", "priors"),
+                       help="what to train; priors: every shipped prior with its recipe (motion_envs/priors/recipe.py)")
+    train.add_argument("--stages", default=None,
+                       help="priors: comma-separated stages to run (default all; e.g. wandr,clops_stage1,clops)")
     train.add_argument("--stage", default="predictor", help="gamma: predictor | regressor | pose-vae | g-cvae")
     train.add_argument("--seed-frames", type=int, default=2, choices=(1, 2), help="predictor: seed frames")
     train.add_argument("--epochs", type=int, default=None, help="epochs (predictor: single-primitive epochs)")
@@ -448,16 +476,19 @@ def parser() -> argparse.ArgumentParser:
                        help="wandr: share of training goals drawn ≥ 1.5 m away (default 0.5; the release: 1)")
     train.add_argument("--prior-init", "--clops-init", dest="prior_init", default=None,
                        help="wandr, clops: prior weights to start from, or 'scratch' (default: wandr scratch, clops the shipped wandr.pt)")
+    train.add_argument("--contact-weight", type=float, default=None,
+                       help="gamma predictor, wandr, clops: weight of the contact loss (stance feet held still where the "
+                            "cleaned data labels contact; default 3 for gamma, 1 for wandr/clops; 0: off)")  # fmt: skip
     train.add_argument("--device", default=None, help="ppo, dqn: where the policy and the prior run (default cpu; cuda)")
     train.add_argument("--seed", type=int, default=None)
-    _add_data_args(train, ["cmu"])
+    _add_data_args(train, list(SHIPPED_SUBSETS))
     train.set_defaults(run=_train)
 
     bench = commands.add_parser("bench", help="run a benchmark and write benchmarks/results/*.md").add_subparsers(
         dest="name", required=True
     )
     bench_data = bench.add_parser("data", help="data quality: clips, retarget error, foot skating, FK speed")
-    _add_data_args(bench_data, ["cmu"])
+    _add_data_args(bench_data, list(SHIPPED_SUBSETS))
     bench_data.set_defaults(run=_bench_data)
     bench_gamma = bench.add_parser("gamma", help="GAMMA goal reaching (Table 1 protocol) with the shipped weights")
     bench_gamma.add_argument("--quick", action="store_true", help="20 pairs x 8 clones: a few minutes")
@@ -487,6 +518,10 @@ def parser() -> argparse.ArgumentParser:
     bench_clops.add_argument("--families", default=None, help="comma-separated layout families (default: all five)")
     bench_clops.add_argument("--seed", type=int, default=0)
     bench_clops.set_defaults(run=_bench_clops)
+    bench_floor = bench.add_parser("floor", help="feet on the floor in every env, with and without its floor rule (floor.md)")
+    bench_floor.add_argument("--steps", type=int, default=2000, help="env steps per row")
+    bench_floor.add_argument("--seed", type=int, default=0)
+    bench_floor.set_defaults(run=_bench_floor)
     bench.add_parser("speed", help="GAMMA rollout body-primitives/s by batch, fp32 and bf16 (throughput.md)").set_defaults(
         run=_bench_speed
     )
@@ -497,7 +532,7 @@ def parser() -> argparse.ArgumentParser:
         run=_bench_render
     )
     realism = bench.add_parser("gamma-realism", help="random-latent GAMMA motion vs the data: contact score, FS")
-    _add_data_args(realism, ["cmu"])
+    _add_data_args(realism, list(SHIPPED_SUBSETS))
     realism.add_argument("--rollouts", type=int, default=10, help="rollouts per shipped start pose")
     realism.add_argument("--primitives", type=int, default=20)
     realism.add_argument("--seed", type=int, default=0)

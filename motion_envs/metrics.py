@@ -79,3 +79,58 @@ def contact_score(markers: torch.Tensor, fps: float) -> torch.Tensor:
     lowest = markers[..., 2].abs().amin(dim=(1, 2))
     slowest = marker_speeds(markers, fps).amin(dim=(1, 2))
     return torch.exp(-(lowest - CONTACT_HEIGHT).clamp_min(0.0)) * torch.exp(-(slowest - CONTACT_SPEED).clamp_min(0.0))
+
+
+LOADED_HEIGHT = 0.025
+"""A sole point within this height (m) of the local floor can bear weight (`loaded_foot_skating`)."""
+LOADED_SPEED = 0.2
+"""Horizontal speed (m/s) above which a loaded sole point skates: WANDR's 0.66 cm per frame at 30 fps."""
+
+
+def local_floor(heights: torch.Tensor, fps: float, seconds: float = 1.0) -> torch.Tensor:
+    """(..., T) the lowest of `heights` (..., T) within +-seconds/2 of each frame: the floor the feet stand on,
+    wherever a clip's or a prior's ground drifts (and on steps)."""
+    window = max(1, int(round(seconds * fps))) | 1
+    flat = heights.reshape(-1, 1, heights.shape[-1])
+    lowest = -torch.nn.functional.max_pool1d(-flat, window, stride=1, padding=window // 2)
+    return lowest.reshape(heights.shape)
+
+
+def loaded_foot_skating(soles: torch.Tensor, fps: float, height: float = LOADED_HEIGHT,
+                        speed: float = LOADED_SPEED) -> torch.Tensor:  # fmt: skip
+    """Contact-aware foot skating per frame transition: the loaded foot slides.
+
+    WANDR's FS counts every frame whose lowest foot vertex moves, so a heel landing or a foot rolling from heel
+    to toe (the lowest vertex travels along the sole) counts as skating, and clean capture scores 46%. Here
+    fixed sole points count, and only the one bearing the weight: at frame t the loaded point is the lowest of
+    the four (the heel or the toe of the loaded foot); a transition skates when that same point is within
+    `height` of the local floor (`local_floor` of the lowest sole point) at t and t + 1 and moves horizontally
+    faster than `speed`. A point pivoting about itself does not move, so heel strikes, roll-offs and turns on
+    the spot do not count.
+
+    Args:
+        soles: (..., T, 4, 3) sole points in `body.markers.SOLE_POINTS` order (left heel, left toe, right heel,
+            right toe), or any two points per foot in that layout (the raw sources: ankle and toe joints).
+        fps: their frame rate.
+
+    Returns:
+        (..., T - 1) bool, True where the loaded foot skates. Its mean is the contact-aware FS.
+    """
+    z = soles[..., 2]
+    floor = local_floor(z.amin(-1), fps)
+    lowest = z[..., :-1, :].argmin(-1, keepdim=True)  # (..., T-1, 1): the loaded foot's lower point
+    now = soles[..., :-1, :, :].gather(-2, lowest[..., None].expand(*lowest.shape, 3)).squeeze(-2)
+    then = soles[..., 1:, :, :].gather(-2, lowest[..., None].expand(*lowest.shape, 3)).squeeze(-2)
+    near = (now[..., 2] - floor[..., :-1] < height) & (then[..., 2] - floor[..., 1:] < height)
+    return near & ((then[..., :2] - now[..., :2]).norm(dim=-1) * fps > speed)
+
+
+def stance_ankle_speed(ankles: torch.Tensor, fps: float) -> torch.Tensor:
+    """Median horizontal speed (m/s) of the stance ankle over (T, 2, 3) ankle positions (left, right): per
+    frame the lower ankle stands, over the transitions where it stays the same one (the measure of
+    `shared/mocap/README.md`). Clean walking capture: 0.15 m/s; NaN for fewer than two frames."""
+    lower = ankles[..., 2].argmin(-1)  # (T,)
+    same = lower[:-1] == lower[1:]
+    step = (ankles[1:, :, :2] - ankles[:-1, :, :2]).norm(dim=-1) * fps  # (T-1, 2)
+    stance = step.gather(-1, lower[:-1, None]).squeeze(-1)[same]
+    return stance.median() if len(stance) else torch.tensor(float("nan"))

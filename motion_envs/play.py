@@ -32,7 +32,7 @@ from motion_envs.body.markers import foot_vertex_ids
 from motion_envs.data.primitives import GAMMA_FPS
 from motion_envs.envs.gamma_reach import GammaReachEnv
 from motion_envs.metrics import foot_skating, skating_threshold
-from motion_envs.priors.canonical import PELVIS
+from motion_envs.body.canonical_frame import PELVIS
 from motion_envs.render.camera import follow_camera
 from motion_envs.render.third_person import ThirdPersonRenderer
 from motion_envs.rollout import Rollout, RolloutRecorder

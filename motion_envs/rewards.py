@@ -32,7 +32,7 @@ from typing import TypeVar
 
 import torch
 
-from motion_envs.priors.canonical import LEFT_HIP, PELVIS, RIGHT_HIP
+from motion_envs.body.canonical_frame import LEFT_HIP, PELVIS, RIGHT_HIP
 
 
 @dataclass(frozen=True)

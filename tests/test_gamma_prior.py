@@ -9,7 +9,7 @@ import torch
 
 from motion_envs.data.primitives import PRIMITIVE_FRAMES
 from motion_envs.precision import native_bf16
-from motion_envs.priors.canonical import canonical_frame, to_canonical, to_world
+from motion_envs.body.canonical_frame import canonical_frame, to_canonical, to_world
 from motion_envs.priors.gamma import (
     BodyRegressor,
     MarkerCVAE,

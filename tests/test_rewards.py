@@ -8,7 +8,7 @@ import pytest
 import torch
 
 from motion_envs.metrics import contact_score, marker_speeds
-from motion_envs.priors.canonical import LEFT_HIP, PELVIS, RIGHT_HIP
+from motion_envs.body.canonical_frame import LEFT_HIP, PELVIS, RIGHT_HIP
 from motion_envs.rewards import (
     RewardConfig,
     contact_reward,

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import torch
 
 from motion_envs.data.primitives import PRIMITIVE_FRAMES, MarkerClips
-from motion_envs.priors.canonical import PELVIS, canonical_frame, goal_observation, to_canonical
+from motion_envs.body.canonical_frame import PELVIS, canonical_frame, goal_observation, to_canonical
 
 
 @dataclass(frozen=True)

@@ -17,7 +17,7 @@ from motion_envs.body import BodyModel
 from motion_envs.body.markers import marker_ids
 from motion_envs.data.dataset import MotionDataset
 from motion_envs.data.motion import BodyMotion
-from motion_envs.priors.canonical import canonical_frame, to_canonical
+from motion_envs.body.canonical_frame import canonical_frame, to_canonical
 
 PRIMITIVE_FRAMES = 10
 GAMMA_FPS = 40
@@ -28,7 +28,7 @@ class MarkerWindows:
     """Windows in their own canonical frame.
 
     markers: (B, L, 67, 3). joints: (B, L, 22, 3). transl: (B, L, 3).
-    global_orient: (B, L, 3). body_pose: (B, L, 21, 3).
+    global_orient: (B, L, 3). body_pose: (B, L, 21, 3). contacts: (B, L, 4) bool sole contacts.
     """
 
     markers: torch.Tensor
@@ -36,6 +36,7 @@ class MarkerWindows:
     transl: torch.Tensor
     global_orient: torch.Tensor
     body_pose: torch.Tensor
+    contacts: torch.Tensor
 
 
 @dataclass(frozen=True)
@@ -43,7 +44,8 @@ class MarkerClips:
     """Every clip of one split with its markers and joints, frames concatenated.
 
     markers: (F, 67, 3). joints: (F, 22, 3). transl: (F, 3). global_orient: (F, 3).
-    body_pose: (F, 21, 3). clip_start: (C + 1,) first frame of each clip.
+    body_pose: (F, 21, 3). clip_start: (C + 1,) first frame of each clip. contacts: (F, 4) bool sole
+    contacts (`SOLE_POINTS` order; all False for uncleaned data).
     """
 
     markers: torch.Tensor
@@ -53,6 +55,7 @@ class MarkerClips:
     body_pose: torch.Tensor
     clip_start: torch.Tensor
     fps: int
+    contacts: torch.Tensor
 
     @classmethod
     def from_dataset(cls, dataset: MotionDataset, split: str, body: BodyModel, mirrored: bool = False) -> MarkerClips:
@@ -78,7 +81,8 @@ class MarkerClips:
             posed = body(transl, orient, pose)
             markers = body.skin(posed, marker_ids())
         starts = torch.cumsum(torch.tensor([0] + [c.num_frames for c in clips]), dim=0)
-        return cls(markers, posed.joints.contiguous(), transl, orient, pose, starts, int(clips[0].fps))
+        contacts = torch.as_tensor(np.concatenate([c.info.get("contacts", np.zeros((c.num_frames, 4), bool)) for c in clips]))
+        return cls(markers, posed.joints.contiguous(), transl, orient, pose, starts, int(clips[0].fps), contacts)
 
     def window_starts(self, length: int, stride: int = 1) -> torch.Tensor:
         """(W,) first frames of every window of `length` frames lying inside one clip."""
@@ -97,4 +101,4 @@ class MarkerClips:
         transl = to_canonical(self.transl[frames], frame)
         turn = frame.rotation.transpose(-1, -2)[:, None]  # world -> canonical
         orient = roma.rotmat_to_rotvec(turn @ roma.rotvec_to_rotmat(self.global_orient[frames]))
-        return MarkerWindows(markers, joints, transl, orient, self.body_pose[frames])
+        return MarkerWindows(markers, joints, transl, orient, self.body_pose[frames], self.contacts[frames])

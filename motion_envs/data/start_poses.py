@@ -22,6 +22,7 @@ from motion_envs.data.build import DEFAULT_FPS, build
 from motion_envs.data.canonical import canonicalise
 from motion_envs.data.dataset import MotionDataset
 from motion_envs.data.motion import BodyMotion
+from motion_envs.data.paths import SHIPPED_SUBSETS
 
 WINDOW = 10
 PER_KIND = 24
@@ -68,7 +69,7 @@ def select_start_poses(dataset: MotionDataset, body: BodyModel) -> dict[str, np.
 def write_start_poses(
     mocap_dir: Path | None = None,
     cache_dir: Path | None = None,
-    subsets: tuple[str, ...] = ("cmu",),
+    subsets: tuple[str, ...] = SHIPPED_SUBSETS,
     destination: Path | None = None,
 ) -> Path:
     """Build (or reuse) the cache and write the start poses for every default frame rate."""

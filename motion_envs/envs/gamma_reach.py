@@ -42,6 +42,13 @@ over the centre, facing a uniformly random direction, its lowest foot point
 snapped to the ground. The goal is uniform on
 the ground, at least `min_goal_distance` from the start.
 
+## Floor
+
+With `ground_feet` (default) each new frame is moved vertically so that the body's lowest foot marker
+touches the ground, as WandrReach's rule: the prior's height drifts (random latents bury a body or fly it
+metres up) and a walking body always has a foot down. The realism benchmarks also measure the prior
+without it (`ground_feet=False`).
+
 ## Episode End
 
 Success: the pelvis (last frame of a primitive) within `goal_radius` (0.75 m)
@@ -83,7 +90,7 @@ from motion_envs.envs.core import CoreVectorEnv, check_actions, config_from_kwar
 from motion_envs.envs.options import check_known, index, number, point
 from motion_envs.metrics import contact_score, marker_speeds
 from motion_envs.precision import PRECISIONS, resolve_precision
-from motion_envs.priors.canonical import PELVIS, goal_observation
+from motion_envs.body.canonical_frame import PELVIS, goal_observation
 from motion_envs.priors.gamma_generator import GammaGenerator, GammaSeed, Primitive
 from motion_envs.render.env_view import EnvView, RenderInputs
 from motion_envs.rewards import (
@@ -118,6 +125,9 @@ class GammaReachConfig:
     weights_dir: str | None = None
     """Folder with the GAMMA weights (default: the shipped ones)."""
     device: str = "cpu"
+    ground_feet: bool = True
+    """The floor rule: each new frame is moved vertically so the body's lowest foot marker is on the ground
+    (`GammaGenerator.step`); False shows the raw prior, whose height drifts."""
     precision: str = "auto"
     """The prior's networks: "float32", "bfloat16", or "auto": bf16 where the device multiplies it natively
     (`motion_envs.precision`; AMX / AVX512-BF16 CPUs, bf16 GPUs), else fp32. The core sets its generator's."""
@@ -246,7 +256,7 @@ class GammaReachCore:
         """Generate one primitive per body from latents z (N, 128) and score it."""
         config, weights = self.config, self.config.reward
         z = z.to(self.device, torch.float32).clamp(-config.latent_bound, config.latent_bound)
-        primitive, next_seed = self.generator.step(state.seed, z, state.goal)
+        primitive, next_seed = self.generator.step(state.seed, z, state.goal, ground_feet=config.ground_feet)
         joints, goal = primitive.joints, state.goal
         pelvis_start, pelvis_end = joints[:, 0, PELVIS], joints[:, -1, PELVIS]
         distance = (pelvis_end[:, :2] - goal[:, :2]).norm(dim=-1)

@@ -13,7 +13,14 @@ and N latent codes and, batched over bodies:
 4. blends: the primitive's markers are the average of predicted and
    re-projected markers (the paper's "ours-ro", release factor 0.5), so a
    body never drifts more than half the prediction error from its markers;
-5. returns the primitive (world) and the next seed: its last two frames.
+5. with `ground_feet` (the envs' floor rule, as WANDR's stepper), lifts or
+   lowers each new frame so that its lowest foot marker is on the floor: our
+   small-data prior's height drifts (random latents bury a body or fly it
+   metres up), and a walking body always has a foot down (GAMMA generates
+   walking; a jump would be pulled down); the seed frames are the previous
+   primitive's, already grounded. Off by default: `step` alone is the raw
+   prior, which the realism benchmarks measure too;
+6. returns the primitive (world) and the next seed: its last two frames.
 
 Seed frames are part of every primitive (frames 0..S-1), so a primitive always
 has 10 frames; the 10 - S after the seed are new.
@@ -37,10 +44,10 @@ import torch
 
 from motion_envs.batched import BatchedState
 from motion_envs.body import BodyModel
-from motion_envs.body.markers import marker_ids
+from motion_envs.body.markers import FOOT_MARKERS, MARKER_NAMES, marker_ids
 from motion_envs.body.rotations import matrix_to_sixd, rotation_matrix
 from motion_envs.data.primitives import PRIMITIVE_FRAMES
-from motion_envs.priors.canonical import CanonicalFrame, canonical_frame, goal_observation, to_canonical, to_world
+from motion_envs.body.canonical_frame import CanonicalFrame, canonical_frame, goal_observation, to_canonical, to_world
 from motion_envs.priors.gamma import MarkerCVAE, PoseVAE, goal_conditioned_seed
 from motion_envs.priors.train_gamma import load_predictor
 from motion_envs.priors.train_pose_prior import load_pose_vae
@@ -177,9 +184,10 @@ class GammaGenerator(torch.nn.Module):
         return GammaSeed(count, twice(markers), twice(joints), twice(transl), twice(orient), twice(pose))
 
     @torch.no_grad()
-    def step(self, seed: GammaSeed, z: torch.Tensor, goal: torch.Tensor | None = None) -> tuple[Primitive, GammaSeed]:
+    def step(self, seed: GammaSeed, z: torch.Tensor, goal: torch.Tensor | None = None,
+             ground_feet: bool = False) -> tuple[Primitive, GammaSeed]:  # fmt: skip
         """Generate one primitive for every body. z: (N, latent). goal: (N, 3) world, needed (and only used)
-        by a goal-conditioned predictor (the g-CVAE baseline)."""
+        by a goal-conditioned predictor (the g-CVAE baseline). `ground_feet`: the floor rule (module doc, 5)."""
         count = len(z)
         bodies = torch.arange(count, device=z.device)
         first = seed.joints[bodies, 2 - seed.seed_frames]  # (N, 22, 3) first seed frame
@@ -193,6 +201,8 @@ class GammaGenerator(torch.nn.Module):
                 parts.append((rows, self._group(seed, rows, seed_slot[rows, 2 - frames :], group_frame, model, z[rows],
                                                 None if goal is None else goal[rows], first[rows])))  # fmt: skip
         fields = _merge(parts, count)
+        if ground_feet:
+            fields = _grounded(fields, seed.seed_frames)
         primitive = Primitive(**fields, seed_frames=seed.seed_frames)
         next_seed = GammaSeed(
             torch.full_like(seed.seed_frames, 2), primitive.markers[:, -2:], primitive.joints[:, -2:],
@@ -232,6 +242,22 @@ class GammaGenerator(torch.nn.Module):
 
 
 SEED_FIELDS = ("markers", "joints", "transl", "global_orient", "body_pose")
+FOOT_MARKER_IDS = tuple(MARKER_NAMES.index(name) for name in FOOT_MARKERS)
+POSITION_FIELDS = ("markers", "predicted_markers", "reprojected_markers", "joints", "transl")
+
+
+def _grounded(fields: dict[str, torch.Tensor], seed_frames: torch.Tensor) -> dict[str, torch.Tensor]:
+    """`Primitive` fields (N, 10, ...) with each new frame moved vertically so that the lowest of its foot
+    markers (heel, toe, sole under the ball: within 0.5 cm of the sole at rest) is at z = 0."""
+    new = torch.arange(PRIMITIVE_FRAMES, device=seed_frames.device) >= seed_frames[:, None]  # (N, 10)
+    feet = fields["markers"][:, :, FOOT_MARKER_IDS, 2].amin(-1)  # (N, 10)
+    lift = torch.where(new, -feet, torch.zeros_like(feet))  # (N, 10)
+    grounded = dict(fields)
+    for name in POSITION_FIELDS:
+        value = fields[name].clone()
+        value[..., 2] += lift if value.dim() == 3 else lift[..., None]
+        grounded[name] = value
+    return grounded
 
 
 def _merge(parts: list[tuple[torch.Tensor, dict[str, torch.Tensor]]], count: int) -> dict[str, torch.Tensor]:

@@ -15,7 +15,8 @@ from pathlib import Path
 import torch
 
 from motion_envs.data.primitives import PRIMITIVE_FRAMES, MarkerClips, MarkerWindows
-from motion_envs.priors.canonical import canonical_frame, to_canonical, to_world
+from motion_envs.body.canonical_frame import canonical_frame, to_canonical, to_world
+from motion_envs.body.markers import MARKER_NAMES
 from motion_envs.priors.gamma import MarkerCVAE, MarkerCVAEConfig, predictor_loss
 from motion_envs.priors.training import TrainRun, fit, load_shipped, minibatches, seed_everything, ship
 
@@ -33,6 +34,8 @@ class PredictorTrainConfig(TrainRun):
     batch_size: int = 128
     learning_rate: float = 5e-4
     window_stride: int = 2
+    contact_weight: float = 3.0
+    """Weight of the contact loss (`contact_slide`, m), as Eq. 1's difference term; 0 turns it off."""
     run_dir: Path = Path("runs/gamma_predictor")
 
     def rollout_frames(self) -> int:
@@ -40,10 +43,30 @@ class PredictorTrainConfig(TrainRun):
         return seed + self.rollout_primitives * (PRIMITIVE_FRAMES - seed)
 
 
+CONTACT_MARKERS = (("LHEE",), ("LTOE", "LRSTBEEF"), ("RHEE",), ("RTOE", "RRSTBEEF"))
+"""The foot markers standing on each sole contact point (`SOLE_POINTS` order: heels, toes)."""
+
+
+def contact_slide(markers: torch.Tensor, contacts: torch.Tensor) -> torch.Tensor:
+    """Mean horizontal step (m, L1 like Eq. 1) of the foot markers between consecutive frames of markers
+    (B, L, 67, 3) where the data holds their sole point in contact at both frames (contacts (B, L, 4));
+    cleaned data holds them still there, so this pulls a predicted stance foot to rest. 0 without contacts."""
+    step = (markers[:, 1:, :, :2] - markers[:, :-1, :, :2]).norm(dim=-1)  # (B, L-1, 67)
+    held = contacts[:, 1:] & contacts[:, :-1]  # (B, L-1, 4)
+    total, count = step.new_zeros(()), step.new_zeros(())
+    for point, names in enumerate(CONTACT_MARKERS):
+        ids = [MARKER_NAMES.index(n) for n in names]
+        mask = held[..., point, None].expand(-1, -1, len(ids))
+        total = total + (step[..., ids] * mask).sum()
+        count = count + mask.sum()
+    return total / count.clamp_min(1)
+
+
 def rollout_loss(
-    model: MarkerCVAE, windows: MarkerWindows, primitives: int, sample: bool = True
+    model: MarkerCVAE, windows: MarkerWindows, primitives: int, sample: bool = True, contact_weight: float = 0.0
 ) -> dict[str, torch.Tensor]:
-    """Eq. 1 averaged over `primitives` chained primitives; also returns per-frame errors (m).
+    """Eq. 1 averaged over `primitives` chained primitives, plus `contact_weight` times `contact_slide` of the
+    predicted frames (ours: Eq. 1 has no contact term); also returns per-frame errors (m).
 
     With `sample` false the posterior mean is decoded (validation)."""
     seed_frames = model.config.seed_frames
@@ -67,6 +90,10 @@ def rollout_loss(
         for name, value in predictor_loss(seed, truth[:, seed_frames:], reconstruction, mean, log_variance).items():
             total[name] = total.get(name, 0.0) + value / primitives
         predicted = reconstruction.unflatten(-1, (-1, 3))  # (B, step, 67, 3)
+        slide = contact_slide(torch.cat([seed[:, -1:].unflatten(-1, (-1, 3)), predicted], dim=1),
+                              windows.contacts[:, start + seed_frames - 1 : start + PRIMITIVE_FRAMES])  # fmt: skip
+        total["contact"] = total.get("contact", 0.0) + slide / primitives
+        total["total"] = total["total"] + contact_weight * slide / primitives
         errors.append((predicted - truth[:, seed_frames:].unflatten(-1, (-1, 3))).norm(dim=-1).mean(dim=(0, 2)))
         previous_world = to_world(predicted.flatten(1, 2), frame).unflatten(1, (step, -1))[:, -seed_frames:]
     total["frame_error"] = torch.cat(errors)
@@ -109,7 +136,7 @@ def train_predictor(config: PredictorTrainConfig, train: MarkerClips, validation
 
     def loss_terms(epoch: int, starts: torch.Tensor) -> dict[str, torch.Tensor]:
         primitives = config.rollout_primitives if rollout(epoch) else 1
-        terms = rollout_loss(model, train.windows(starts, window_length(epoch)), primitives)
+        terms = rollout_loss(model, train.windows(starts, window_length(epoch)), primitives, contact_weight=config.contact_weight)
         return {name: value for name, value in terms.items() if name != "frame_error"}
 
     history = fit(model, optimiser, settings, epoch_batches, loss_terms, lambda e: "rollout" if rollout(e) else "")

@@ -49,6 +49,8 @@ from motion_envs.data.dataset import MotionDataset
 from motion_envs.data.motion import BodyMotion
 from motion_envs.priors.training import WEIGHTS_DIR, TrainRun, fit, load_shipped, minibatches, seed_everything, ship
 from motion_envs.priors.wandr import WandrConfig, WandrPrior
+from motion_envs.body.markers import sole_vertex_ids
+from motion_envs.data.paths import SHIPPED_SUBSETS
 from motion_envs.priors.wandr_features import (
     FPS, INTENTIONS, PELVIS, RIGHT_WRIST, WandrState, condition, integrate, intention, make_state, pose_delta,
 )  # fmt: skip
@@ -78,6 +80,8 @@ class WandrTrainConfig(TrainRun):
     kl_raise_epoch: int = 0
     free_bits: float = 0.05
     window_stride: int = 1
+    contact_weight: float = 1.0
+    """Weight of `contact_slide` (cm², like the joint term) in the loss; 0 turns the contact loss off."""
     init: Path | None = None
     """Prior weights of the same network to start from (None: from scratch)."""
     run_dir: Path = Path("runs/wandr")
@@ -100,7 +104,8 @@ class WandrClips:
     """Clips of one split, frames concatenated.
 
     transl: (F, 3). orient: (F, 3, 3). pose: (F, 21, 3, 3). joints: (F, 22, 3).
-    clip_end: (F,) one past the last frame of each frame's clip.
+    clip_end: (F,) one past the last frame of each frame's clip. contacts: (F, 4) bool sole contacts
+    (`SOLE_POINTS` order; all False for uncleaned data).
     """
 
     transl: torch.Tensor
@@ -108,6 +113,7 @@ class WandrClips:
     pose: torch.Tensor
     joints: torch.Tensor
     clip_end: torch.Tensor
+    contacts: torch.Tensor
 
     @classmethod
     def from_motions(cls, clips: list[BodyMotion], body: BodyModel) -> WandrClips:
@@ -121,7 +127,8 @@ class WandrClips:
             joints = body(transl, orient, pose).joints
         lengths = torch.tensor([c.num_frames for c in clips])
         clip_end = torch.repeat_interleave(torch.cumsum(lengths, 0), lengths)
-        return cls(transl, rotation_matrix(orient), rotation_matrix(pose), joints, clip_end)
+        contacts = torch.as_tensor(np.concatenate([c.info.get("contacts", np.zeros((c.num_frames, 4), bool)) for c in clips]))
+        return cls(transl, rotation_matrix(orient), rotation_matrix(pose), joints, clip_end, contacts)
 
     @classmethod
     def from_dataset(cls, dataset: MotionDataset, split: str, body: BodyModel, mirrored: bool = False) -> WandrClips:
@@ -195,10 +202,13 @@ def rollout_terms(model: WandrPrior, clips: WandrClips, targets: HindsightTarget
                   sample: bool = True) -> dict[str, torch.Tensor]:  # fmt: skip
     """Mean per-frame losses of rolling windows out for `steps` frames (the first from the data).
 
-    Returns recon, joints (cm²), kl (with free bits), and joint_error_cm (steps,) per frame (no grad).
+    Returns recon, joints (cm²), kl (with free bits), contact (cm², see `contact_slide`) and joint_error_cm
+    (steps,) per frame (no grad).
     """
     state = clips.state(starts)
-    totals = {"recon": 0.0, "joints": 0.0, "kl": 0.0}
+    soles = sole_vertex_ids()
+    previous_soles = body.skin(body.from_matrices(state.transl, state.orient, state.pose), soles)
+    totals = {"recon": 0.0, "joints": 0.0, "kl": 0.0, "contact": 0.0}
     errors = []
     for step in range(steps):
         cond = model.normalise_condition(condition(state, targets.features(state, starts + step, goal_frames)))
@@ -215,13 +225,24 @@ def rollout_terms(model: WandrPrior, clips: WandrClips, targets: HindsightTarget
                             - log_variance + prior_log_variance).mean(0)  # fmt: skip
         totals["kl"] = totals["kl"] + kl_per_dim.clamp_min(free_bits).sum()
         delta = model.denormalise_delta(predicted)
-        state, _ = make_state(body, *integrate(state.transl, state.orient, state.pose, delta), delta)
+        state, posed = make_state(body, *integrate(state.transl, state.orient, state.pose, delta), delta)
+        now_soles = body.skin(posed, soles)
+        totals["contact"] = totals["contact"] + contact_slide(previous_soles, now_soles, clips.contacts[nxt - 1] & clips.contacts[nxt])
+        previous_soles = now_soles
         offset = (state.joints - clips.joints[nxt]) * 100.0
         totals["joints"] = totals["joints"] + (offset**2).mean()
         errors.append(offset.detach().norm(dim=-1).mean())
     terms = {name: value / steps for name, value in totals.items()}
     terms["joint_error_cm"] = torch.stack(errors)
     return terms
+
+
+def contact_slide(before: torch.Tensor, after: torch.Tensor, contacts: torch.Tensor) -> torch.Tensor:
+    """Mean squared horizontal step (cm²) of the sole points (B, 4, 3) from one frame to the next where the
+    data holds them in contact at both (B, 4) (0 where none is): cleaned data holds them still there, so this
+    pulls a generated stance foot to rest (the contact loss of issue "Clean motion")."""
+    step = ((after[..., :2] - before[..., :2]) * 100.0).pow(2).sum(-1)
+    return (step * contacts).sum() / contacts.sum().clamp_min(1)
 
 
 @torch.no_grad()
@@ -258,10 +279,10 @@ def validate(model: WandrPrior, clips: WandrClips, targets: HindsightTargets, co
     return figures
 
 
-def default_weights(config: WandrConfig, subsets: tuple[str, ...] = ("cmu",)) -> str:
+def default_weights(config: WandrConfig, subsets: tuple[str, ...] = SHIPPED_SUBSETS) -> str:
     """The weights' file name: wandr.pt for the full model on CMU; ablations and data variants get suffixes."""
     suffix = "" if tuple(config.intentions) == INTENTIONS else "_" + "_".join(config.intentions)
-    data = "" if tuple(subsets) in ((), ("cmu",)) else "_" + "_".join(subsets)
+    data = "" if tuple(subsets) in ((), SHIPPED_SUBSETS) else "_" + "_".join(subsets)
     return f"wandr{suffix}{data}.pt"
 
 
@@ -304,8 +325,8 @@ def train_delta_prior(model: WandrPrior, kind: str, config: WandrTrainConfig, tr
         goal_frames = train_targets.goal_frames(starts, steps)
         terms = rollout_terms(model, train, train_targets, starts, goal_frames, steps, body, config.free_bits)
         beta = config.kl_beta(step_number, epoch)
-        return {"total": terms["recon"] + terms["joints"] + beta * terms["kl"], "recon": terms["recon"],
-                "joints": terms["joints"], "kl": terms["kl"]}  # fmt: skip
+        return {"total": terms["recon"] + terms["joints"] + beta * terms["kl"] + config.contact_weight * terms["contact"],
+                "recon": terms["recon"], "joints": terms["joints"], "kl": terms["kl"], "contact": terms["contact"]}  # fmt: skip
 
     history = fit(model, optimiser, config.fit_settings(kind), epoch_batches, loss_terms,
                   lambda epoch: f"rollout ≤ {config.rollout_limit(epoch)}")  # fmt: skip

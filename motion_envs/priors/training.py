@@ -175,6 +175,23 @@ def ship(model: nn.Module, weights: Path, entry: dict[str, Any]) -> dict[str, An
     return entry
 
 
+def ship_trained(weights: Path) -> Path:
+    """Copy finished weights of a run folder (and their record in the manifest beside them) into the package's
+    priors/weights/, naming what they replace; returns the shipped path."""
+    weights = Path(weights)
+    manifest_path = weights.parent / "manifest.json"
+    record = json.loads(manifest_path.read_text()).get(weights.name) if manifest_path.exists() else None
+    if record is None:
+        raise FileNotFoundError(f"{weights} has no record in {manifest_path}; ship only what a train command wrote")
+    shipped = WEIGHTS_DIR / weights.name
+    announce_replacement(shipped)
+    data = weights.read_bytes()
+    atomic_write(shipped, lambda file: file.write(data))
+    record_in_manifest(shipped, record)
+    print(f"shipped {weights} as {shipped}", file=sys.stderr)
+    return shipped
+
+
 def record_in_manifest(weights: Path, entry: dict[str, Any]) -> None:
     """Set `entry` as the record of `weights` in the `manifest.json` beside it (written atomically)."""
     manifest_path = weights.parent / "manifest.json"

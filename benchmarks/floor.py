@@ -1,0 +1,142 @@
+"""Feet on the floor in every env (`motion-envs bench floor`).
+
+For each env and action source (uniformly random in-range actions, z ~ N(0, I)
+for the latent envs, the shipped policy) it steps one env for `steps` steps
+(episodes restart as they end), records every generated frame and measures,
+per frame, the lowest foot vertex and the pelvis height:
+
+- lowest foot below -3 cm (share of frames, and the lowest);
+- while walking (pelvis slower than 2 m/s on the ground) the share of frames
+  whose lowest foot vertex is within 5 cm of the floor;
+- the pelvis range and the share of frames outside 0.3-1.3 m.
+
+Each latent env runs with its floor rule (`ground_feet=True`, the default) and
+without it (the raw prior), so the rule hides nothing. Writes
+`benchmarks/results/floor.md`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import gymnasium as gym
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from benchmarks.machine import machine_line
+from motion_envs.atomic import atomic_write
+from motion_envs.body import BodyModel
+from motion_envs.body.markers import foot_vertex_ids
+from motion_envs.play import RolloutRecorder, _record_step
+from motion_envs.priors.training import WEIGHTS_DIR
+
+RESULTS = Path(__file__).resolve().parent / "results"
+POLICIES = {
+    "motion_envs/GammaReach-v0": "ppo_gammareach_alpha1_paper.zip",
+    "motion_envs/WandrReach-v0": "ppo_wandrreach_alpha1_default.zip",
+    "motion_envs/ClopsNav-v0": "dqn_clopsnav_open.zip",
+}
+WALKING_SPEED = 2.0
+NEAR_FLOOR = 0.05
+BELOW_FLOOR = -0.03
+PELVIS_RANGE = (0.3, 1.3)
+
+
+@dataclass(frozen=True)
+class FloorFigures:
+    frames: int
+    below_share: float
+    lowest: float
+    near_share_walking: float
+    pelvis_min: float
+    pelvis_max: float
+    pelvis_outside_share: float
+
+
+def measure(transl: np.ndarray, rotations: np.ndarray, fps: float, body: BodyModel) -> FloorFigures:
+    """Figures of frames transl (T, 3), rotations (T, 22, 3) axis-angle of one body (episode cuts included:
+    a cut's speed is one frame's, at most a few of the frames)."""
+    with torch.inference_mode():
+        pose = body(torch.as_tensor(transl), torch.as_tensor(rotations[:, 0]), torch.as_tensor(rotations[:, 1:]))
+        lowest = body.skin(pose, foot_vertex_ids())[..., 2].amin(-1).numpy()
+        pelvis = pose.joints[:, 0].numpy()
+    speed = np.linalg.norm(np.gradient(pelvis[:, :2], axis=0), axis=-1) * fps
+    walking = speed < WALKING_SPEED
+    outside = (pelvis[:, 2] < PELVIS_RANGE[0]) | (pelvis[:, 2] > PELVIS_RANGE[1])
+    return FloorFigures(len(lowest), float((lowest < BELOW_FLOOR).mean()), float(lowest.min()),
+                        float((np.abs(lowest[walking]) <= NEAR_FLOOR).mean()), float(pelvis[:, 2].min()),
+                        float(pelvis[:, 2].max()), float(outside.mean()))  # fmt: skip
+
+
+def action_source(name: str, env: gym.Env, env_id: str, seed: int) -> Callable[[object], np.ndarray | int]:
+    """observation -> action: "uniform" (in-range), "normal" (z ~ N(0, I)) or "policy" (the shipped one)."""
+    generator = np.random.default_rng(seed)
+    env.action_space.seed(seed)
+    if name == "uniform":
+        return lambda observation: env.action_space.sample()
+    if name == "normal":
+        return lambda observation: generator.standard_normal(env.action_space.shape).astype(np.float32)
+    path = WEIGHTS_DIR / POLICIES[env_id]
+    if env_id.endswith("ClopsNav-v0"):
+        from motion_envs.play import clops_controller
+
+        controller = clops_controller(path, None, seed)
+        return lambda observation: controller(env.unwrapped, observation)
+    from agents.controllers import PolicyLatent
+
+    policy = PolicyLatent(path, seed=seed)
+    return lambda observation: policy(env.unwrapped.core, env.unwrapped.state)[0].numpy()
+
+
+def run(env_id: str, source: str, steps: int, seed: int, body: BodyModel, **env_kwargs) -> FloorFigures:
+    env = gym.make(env_id, **env_kwargs)
+    act = action_source(source, env, env_id, seed)
+    recorder = RolloutRecorder(fps=30.0)
+    unwrapped = env.unwrapped
+    if hasattr(unwrapped, "keep_frames"):
+        unwrapped.keep_frames = True
+    observation, _ = env.reset(seed=seed)
+    for _ in tqdm(range(steps), desc=f"{env_id.split('/')[1]} {source} {env_kwargs or ''}", unit="step", leave=False):
+        observation, _, terminated, truncated, _ = env.step(act(observation))
+        _record_step(unwrapped, recorder)
+        if terminated or truncated:
+            observation, _ = env.reset()
+    rollout = recorder.rollout()
+    fps = 40.0 if "Gamma" in env_id else 30.0
+    return measure(rollout.transl[:, 0], rollout.rotations[:, 0], fps, body)
+
+
+def main(steps: int = 2000, seed: int = 0) -> int:
+    body = BodyModel()
+    cases = []
+    for env_id in POLICIES:
+        sources = ("uniform", "policy") if env_id.endswith("ClopsNav-v0") else ("uniform", "normal", "policy")
+        rules = ((True,),) if env_id.endswith("ClopsNav-v0") else ((True,), (False,))
+        for source in sources:
+            for (ground,) in rules:
+                kwargs = {} if env_id.endswith("ClopsNav-v0") else {"ground_feet": ground}
+                cases.append((env_id, source, "on" if ground else "off (raw prior)", run(env_id, source, steps, seed, body, **kwargs)))
+    lines = [
+        "# Feet on the floor",
+        "",
+        f"Command: `motion-envs bench floor --steps {steps}`. {machine_line()}",
+        "",
+        f"{steps} env steps per row (episodes restart), one body, every generated frame measured. Floor rule: the",
+        "env's `ground_feet` (ClopsNav always grounds its bodies). Targets: no frame below -3 cm; while walking",
+        "(pelvis < 2 m/s) >= 95% of frames within 5 cm of the floor; pelvis within 0.3-1.3 m.",
+        "",
+        "| env | actions | floor rule | frames | frames < -3 cm | lowest foot (m) | walking frames within 5 cm "
+        "| pelvis min / max (m) | pelvis outside 0.3-1.3 m |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for env_id, source, rule, f in cases:
+        lines.append(f"| {env_id.split('/')[1]} | {source} | {rule} | {f.frames:,} | {f.below_share:.1%} | {f.lowest:.3f} "
+                     f"| {f.near_share_walking:.1%} | {f.pelvis_min:.2f} / {f.pelvis_max:.2f} | {f.pelvis_outside_share:.1%} |")  # fmt: skip
+    text = "\n".join(lines) + "\n"
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    atomic_write(RESULTS / "floor.md", lambda file: file.write(text.encode()))
+    print(text)
+    return 0

@@ -1,0 +1,116 @@
+"""`motion-envs train priors`: rebuild every shipped prior from a mocap folder with its shipped recipe.
+
+Each stage is one `motion-envs train ...` command (run as a child process, so
+its manifest records that command) writing into `runs/priors/<stage>/`. A stage
+whose weights are already there is skipped and an interrupted one resumes from
+its checkpoint (every train command does), so rerunning `train priors` after a
+kill continues where it stopped. With `--ship` each finished stage's weights and
+manifest record are copied into `motion_envs/priors/weights/` (`ship_trained`,
+naming what they replace); the intermediate CLOPS stage is not shipped.
+
+`minutes` is the wall time measured for the stage on 2 cores (one thread each,
+two stages at a time) on the shipped data (CMU + ACCAD, 147 clips); a larger
+mocap folder scales it roughly with its number of frames.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+from motion_envs.priors.training import ship_trained
+
+RUNS = Path("runs/priors")
+
+
+@dataclass(frozen=True)
+class Stage:
+    """name: also its run folder. command: the train arguments (without --run-dir/--weights/--ship/data
+    options; "{stage}" stands for that stage's weights). weights: the file it writes. needs: stages whose
+    weights it starts from. ships: whether `--ship` ships it (not an intermediate stage's)."""
+
+    name: str
+    command: tuple[str, ...]
+    weights: str
+    minutes: float | None
+    needs: tuple[str, ...] = ()
+    ships: bool = True
+
+    def arguments(self, root: Path) -> list[str]:
+        """`command` with the "{stage}" placeholders filled in."""
+        outputs = {other.name: str(other.output(root)) for other in RECIPE}
+        return [word.format(**outputs) for word in self.command]
+
+    def run_dir(self, root: Path) -> Path:
+        return root / self.name
+
+    def output(self, root: Path) -> Path:
+        return self.run_dir(root) / self.weights
+
+
+RECIPE: tuple[Stage, ...] = (
+    Stage("wandr", ("wandr", "--epochs", "40", "--window-stride", "2", "--late-kl-weight", "0.1", "--kl-raise-epoch", "22"),
+          "wandr.pt", None),
+    Stage("clops_stage1", ("clops", "--prior-init", "{wandr}"), "clops.pt", None, needs=("wandr",), ships=False),
+    Stage("clops", ("clops", "--prior-init", "{clops_stage1}", "--max-rollout", "30", "--epochs", "6"), "clops.pt", None,
+          needs=("clops_stage1",)),
+    Stage("gamma_predictor_1f", ("gamma", "--stage", "predictor", "--seed-frames", "1", "--epochs", "25", "--rollout-epochs", "3"),
+          "gamma_predictor_1f.pt", None),
+    Stage("gamma_predictor_2f", ("gamma", "--stage", "predictor", "--seed-frames", "2", "--epochs", "25", "--rollout-epochs", "3"),
+          "gamma_predictor_2f.pt", None),
+    Stage("gamma_regressor", ("gamma", "--stage", "regressor", "--epochs", "46", "--batch-size", "16", "--window-stride", "4"),
+          "gamma_regressor.pt", None),
+    Stage("gamma_pose_vae", ("gamma", "--stage", "pose-vae", "--epochs", "20"), "gamma_pose_vae.pt", None),
+    Stage("gamma_g_cvae_2f", ("gamma", "--stage", "g-cvae", "--epochs", "12"), "gamma_g_cvae_2f.pt", None),
+)  # fmt: skip
+"""The shipped priors' recipe, in an order that respects `needs`."""
+
+
+def stages_named(names: list[str] | None) -> list[Stage]:
+    """The recipe's stages with these names (all when None), in recipe order; an unknown name is an error."""
+    known = {stage.name: stage for stage in RECIPE}
+    unknown = sorted(set(names or ()) - set(known))
+    if unknown:
+        raise ValueError(f"unknown stage(s) {', '.join(unknown)}; the stages are {', '.join(known)}")
+    return [stage for stage in RECIPE if names is None or stage.name in names]
+
+
+def stage_argv(stage: Stage, root: Path, data_args: list[str]) -> list[str]:
+    """The `motion-envs` argument list of one stage."""
+    return ["train", *stage.arguments(root), "--run-dir", str(stage.run_dir(root)), "--weights",
+            str(stage.output(root)), *data_args]  # fmt: skip
+
+
+def plan(stages: list[Stage], root: Path) -> list[str]:
+    """One line per stage: done or to run, with its expected wall time."""
+    lines = []
+    for stage in stages:
+        state = "done" if stage.output(root).exists() else "to run"
+        expected = f"~{stage.minutes:.0f} min" if stage.minutes is not None else "time not measured yet"
+        lines.append(f"  {stage.name:20s} {state:7s} {expected:24s} motion-envs train {' '.join(stage.arguments(root))}")
+    return lines
+
+
+def train_priors(names: list[str] | None = None, root: Path = RUNS, ship: bool = False,
+                 data_args: list[str] | None = None) -> int:  # fmt: skip
+    """Run the stages in order (skipping finished ones); returns the first failing stage's exit code, or 0."""
+    stages = stages_named(names)
+    print("stages (expected wall time on 2 cores):", *plan(stages, root), sep="\n")
+    for stage in stages:
+        missing = [need for need in stage.needs if not next(s for s in RECIPE if s.name == need).output(root).exists()]
+        if missing:
+            raise RuntimeError(f"stage {stage.name} starts from {', '.join(missing)}, which has not been trained in {root}")
+        if stage.output(root).exists():
+            print(f"{stage.name}: done ({stage.output(root)})")
+        else:
+            argv = stage_argv(stage, root, data_args or [])
+            print(f"{stage.name}: motion-envs {' '.join(argv)}", flush=True)
+            code = subprocess.call([sys.executable, "-m", "motion_envs.cli", *argv])
+            if code != 0:
+                print(f"{stage.name} failed (exit {code}); rerun the same command to resume it", file=sys.stderr)
+                return code
+        if ship and stage.ships:
+            ship_trained(stage.output(root))
+    return 0

@@ -1,0 +1,43 @@
+"""`motion-envs train priors`: the shipped recipe's stages, their commands, skipping finished ones, shipping."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from motion_envs.cli import main
+from motion_envs.priors import recipe, training
+
+
+def test_stages_fill_in_the_weights_they_start_from_and_unknown_ones_fail(tmp_path):
+    clops = recipe.stages_named(["clops"])[0]
+    argv = recipe.stage_argv(clops, tmp_path, ["--mocap-dir", "m"])
+    assert argv[:2] == ["train", "clops"]
+    assert argv[argv.index("--prior-init") + 1] == str(tmp_path / "clops_stage1" / "clops.pt")
+    assert argv[argv.index("--weights") + 1] == str(tmp_path / "clops" / "clops.pt") and argv[-2:] == ["--mocap-dir", "m"]
+    with pytest.raises(ValueError, match="unknown stage.*wandr"):
+        recipe.stages_named(["wandr", "nope"])
+    assert [s.name for s in recipe.stages_named(None)] == [s.name for s in recipe.RECIPE]
+
+
+def test_a_stage_needs_the_stages_it_starts_from(tmp_path, capsys):
+    assert main(["train", "priors", "--stages", "clops", "--run-dir", str(tmp_path)]) == 1
+    assert "starts from clops_stage1" in capsys.readouterr().err
+
+
+def test_finished_stages_are_skipped_and_shipped_with_their_record(tmp_path, monkeypatch, capsys):
+    """A finished stage (its weights in its run folder) is not rerun; --ship copies it and its manifest record.
+    The package's weights folder is redirected to a temporary one (shipping must not touch the real one here)."""
+    shipped = tmp_path / "weights"
+    shipped.mkdir()
+    monkeypatch.setattr(training, "WEIGHTS_DIR", shipped)
+    stage = recipe.stages_named(["gamma_pose_vae"])[0]
+    run = stage.run_dir(tmp_path / "runs")
+    run.mkdir(parents=True)
+    stage.output(tmp_path / "runs").write_bytes(b"weights")
+    (run / "manifest.json").write_text(json.dumps({stage.weights: {"command": "motion-envs train gamma --stage pose-vae"}}))
+    assert recipe.train_priors(["gamma_pose_vae"], tmp_path / "runs", ship=True) == 0
+    assert "gamma_pose_vae: done" in capsys.readouterr().out
+    assert (shipped / stage.weights).read_bytes() == b"weights"
+    assert json.loads((shipped / "manifest.json").read_text())[stage.weights]["command"].endswith("pose-vae")

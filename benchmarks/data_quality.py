@@ -310,9 +310,6 @@ def main(mocap_dir: Path | None = None, cache_dir: Path | None = None, subsets: 
     worst = int(np.argmax(errors))
     lines += [
         "",
-        "FS: fraction of frame transitions in which the lowest foot vertex moves more than 0.66 cm",
-        "horizontally by the next frame (WANDR's definition, no height gating).",
-        "",
         "## Retargeting error (cm, per clip mean over frames and mapped joints)",
         "",
         "| mean over clips | p95 over clips | max clip | clips > 6 cm |",

@@ -11,7 +11,10 @@ over 2.6 s). `clean` runs after retargeting, on the body itself:
    count as floor) and slow, with hysteresis (it enters below
    `contact_height`/`contact_speed` and leaves above `release_height`/
    `release_speed`); gaps and contacts shorter than `min_contact_seconds`
-   are closed and dropped. The speed gate is loose
+   are closed and dropped, and a contact whose point has slid more than
+   `max_contact_travel`, or whose foot has turned more than `max_contact_turn`,
+   since it began ends there (a foot shuffling or pivoting on the spot makes
+   several contacts). The speed gate is loose
    (0.8 m/s to enter) on purpose: a sliding stance foot of the Daz files
    moves at 0.4-0.5 m/s, a swinging foot at 2-4 m/s.
 2. **Floor**: a plane z = a + b x + c y fitted to the contact points with
@@ -68,6 +71,8 @@ class CleanupConfig:
     contact_speed: float = 0.8
     release_speed: float = 1.2
     min_contact_seconds: float = 0.1
+    max_contact_travel: float = 0.3
+    max_contact_turn: float = 0.35
     floor_window_seconds: float = 1.0
     floor_tolerance: float = 0.03
     max_floor_slope: float = 0.08
@@ -139,6 +144,25 @@ def fill_gaps(labels: np.ndarray, max_frames: int) -> np.ndarray:
     return filled
 
 
+def split_travelling(labels: np.ndarray, points: np.ndarray, max_travel: float, max_turn: float) -> np.ndarray:
+    """(T, 4) bool with each run of True ended (one frame off) where its point has moved more than `max_travel`
+    horizontally, or its foot (heel -> toe) has turned more than `max_turn` radians about the vertical, since
+    the run began; the rest starts a new run: a foot shuffling or pivoting on the spot makes several contacts
+    (one lock over a turn would twist the leg)."""
+    split = labels.copy()
+    heel_to_toe = points[:, [1, 1, 3, 3], :2] - points[:, [0, 0, 2, 2], :2]
+    yaw = np.arctan2(heel_to_toe[..., 1], heel_to_toe[..., 0])  # (T, 4): each point's foot
+    for point in range(labels.shape[1]):
+        for start, stop in runs(labels[:, point]):
+            anchor = start
+            for frame in range(start + 1, stop):
+                turn = abs(np.angle(np.exp(1j * (yaw[frame, point] - yaw[anchor, point]))))
+                if np.linalg.norm(points[frame, point, :2] - points[anchor, point, :2]) > max_travel or turn > max_turn:
+                    split[frame, point] = False
+                    anchor = frame + 1
+    return split
+
+
 def runs(flags: np.ndarray) -> list[tuple[int, int]]:
     """[start, stop) of each run of True in a (T,) bool array."""
     edges = np.diff(np.concatenate([[0], flags.astype(np.int8), [0]]))
@@ -154,21 +178,27 @@ def label_contacts(points: np.ndarray, fps: float, config: CleanupConfig = Clean
     enter = (height < config.contact_height) & (speed < config.contact_speed)
     stay = (height < config.release_height) & (speed < config.release_speed)
     shortest = max(1, int(round(config.min_contact_seconds * fps)))
-    return drop_short(fill_gaps(hysteresis(enter, stay), shortest), shortest)
+    labels = split_travelling(fill_gaps(hysteresis(enter, stay), shortest), points, config.max_contact_travel,
+                              config.max_contact_turn)
+    return drop_short(labels, shortest)
 
 
 def fit_floor(points: np.ndarray, contacts: np.ndarray, config: CleanupConfig = CleanupConfig()) -> Floor:
     """The floor plane under the contact points.
 
-    Ridge least squares on centred coordinates (a slope along a direction the contacts span less than
-    `floor_span` is damped: a straight walk says nothing about the sideways tilt), trimmed of points more than
-    `floor_tolerance` off the plane, three times. A constant height when the slope exceeds `max_floor_slope`
-    (a ramp or stairs, not a tilted capture floor) or there are no contacts.
+    Starting from the contacts within `floor_tolerance` of their 10th height percentile (the lowest level
+    the feet stand on: a clip that climbs steps spends most contacts above its floor), ridge least squares on
+    centred coordinates (a slope along a direction the contacts span less than `floor_span` is damped: a
+    straight walk says nothing about the sideways tilt), trimmed of points more than `floor_tolerance` off
+    the plane, three times. A constant height (of that lowest level) when the slope exceeds
+    `max_floor_slope` (a ramp or stairs, not a tilted capture floor) or there are no contacts.
     """
     touching = points[contacts]
     if len(touching) == 0:
         return Floor(float(points[..., 2].min()), (0.0, 0.0), False)
-    inliers = np.ones(len(touching), dtype=bool)
+    ground = np.percentile(touching[:, 2], 10)  # the lowest level the feet stand on, not the steps above it
+    inliers = np.abs(touching[:, 2] - ground) <= config.floor_tolerance
+    slope, height = np.zeros(2), float(np.median(touching[inliers, 2]))
     for _ in range(3):
         xy, z = touching[inliers, :2], touching[inliers, 2]
         centre = xy.mean(axis=0)
@@ -181,7 +211,7 @@ def fit_floor(points: np.ndarray, contacts: np.ndarray, config: CleanupConfig = 
             break
         inliers = trimmed
     if np.hypot(*slope) > config.max_floor_slope:
-        return Floor(float(np.median(touching[:, 2])), (0.0, 0.0), False)
+        return Floor(float(np.median(touching[np.abs(touching[:, 2] - ground) <= config.floor_tolerance, 2])), (0.0, 0.0), False)
     return Floor(float(height), (float(slope[0]), float(slope[1])), True)
 
 

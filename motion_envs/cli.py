@@ -78,6 +78,12 @@ def _bench_wandr_pace(args: argparse.Namespace) -> int:
     return wandr_pace(args.weights or [WEIGHTS_DIR / "wandr.pt"])
 
 
+def _bench_cleanup_video(args: argparse.Namespace) -> int:
+    from benchmarks.cleanup_video import main as cleanup_video
+
+    return cleanup_video(clip=args.clip, mocap_dir=args.mocap_dir, cache_dir=args.cache_dir)
+
+
 def _bench_floor(args: argparse.Namespace) -> int:
     from benchmarks.floor import main as floor
 
@@ -518,6 +524,10 @@ def parser() -> argparse.ArgumentParser:
     bench_clops.add_argument("--families", default=None, help="comma-separated layout families (default: all five)")
     bench_clops.add_argument("--seed", type=int, default=0)
     bench_clops.set_defaults(run=_bench_clops)
+    video = bench.add_parser("cleanup-video", help="one clip before and after cleanup, side by side (docs/cleanup_<clip>.mp4)")
+    video.add_argument("--clip", default="cmu/08_11", help="clip name in the cache (folder/file without suffix)")
+    _add_data_args(video, list(SHIPPED_SUBSETS))
+    video.set_defaults(run=_bench_cleanup_video)
     bench_floor = bench.add_parser("floor", help="feet on the floor in every env, with and without its floor rule (floor.md)")
     bench_floor.add_argument("--steps", type=int, default=2000, help="env steps per row")
     bench_floor.add_argument("--seed", type=int, default=0)

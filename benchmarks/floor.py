@@ -140,7 +140,7 @@ def head_heights(env_id: str, act: Callable[[gym.Env, object], object], seconds:
     return heights
 
 
-def sinking_rows(episodes: int, seed: int, body: BodyModel) -> list[str]:
+def sinking_rows(episodes: int, seed: int, body: BodyModel, weights_dir: Path | None = None) -> list[str]:
     """Head height (m) at 1 s and over the last second of up to 15 s of sustained walking, per env (a ClopsNav
     episode ends earlier when the body walks into a wall or out of the room)."""
     from motion_envs.play import wandr_controller
@@ -148,13 +148,13 @@ def sinking_rows(episodes: int, seed: int, body: BodyModel) -> list[str]:
     sampler = wandr_controller(None, None, seed)
     wandr = head_heights("motion_envs/WandrReach-v0", lambda env, obs: sampler(env.unwrapped.core, env.unwrapped.state)[0].numpy(),
                          15.0, episodes, seed, body, max_frames=480, goal_distance=(20.0, 20.0), goal_angle=(0.0, 0.0),
-                         goal_height=(1.0, 1.0))  # fmt: skip
+                         goal_height=(1.0, 1.0), **prior_kwargs("motion_envs/WandrReach-v0", weights_dir))  # fmt: skip
 
     def forward(env: gym.Env, observation: object) -> int:
         actions = env.unwrapped.core.prior.actions  # (K, 4): dx, dy, dz, dyaw
         return int(torch.argmax(actions[:, 1] - 2.0 * actions[:, 3].abs()))
 
-    clops = head_heights("motion_envs/ClopsNav-v0", forward, 15.0, episodes, seed, body)
+    clops = head_heights("motion_envs/ClopsNav-v0", forward, 15.0, episodes, seed, body, **prior_kwargs("motion_envs/ClopsNav-v0", weights_dir))
     rows = []
     for label, heights in (("WandrReach, WANDR sampler, goal 20 m ahead", wandr), ("ClopsNav, most forward action", clops)):
         lengths = np.isfinite(heights).sum(axis=1)
@@ -164,20 +164,33 @@ def sinking_rows(episodes: int, seed: int, body: BodyModel) -> list[str]:
     return rows
 
 
-def main(steps: int = 2000, seed: int = 0, episodes: int = 8) -> int:
+def prior_kwargs(env_id: str, weights_dir: Path | None) -> dict:
+    """gym.make options that load the priors of `weights_dir` (nothing for the shipped ones)."""
+    if weights_dir is None:
+        return {}
+    if env_id.endswith("GammaReach-v0"):
+        return {"weights_dir": str(weights_dir)}
+    return {"weights": str(weights_dir / ("wandr.pt" if env_id.endswith("WandrReach-v0") else "clops.pt"))}
+
+
+def main(steps: int = 2000, seed: int = 0, episodes: int = 8, weights_dir: Path | None = None, output: str = "floor") -> int:
+    """`weights_dir`: priors to measure instead of the shipped ones (no policy rows then: the shipped policies
+    were trained on the shipped priors); the table is `output`.md."""
     body = BodyModel()
     cases = []
     for env_id in POLICIES:
         sources = ("uniform", "policy") if env_id.endswith("ClopsNav-v0") else ("uniform", "normal", "policy")
+        sources = tuple(s for s in sources if weights_dir is None or s != "policy")
         rules = ((True,),) if env_id.endswith("ClopsNav-v0") else ((True,), (False,))
         for source in sources:
             for (ground,) in rules:
-                kwargs = {} if env_id.endswith("ClopsNav-v0") else {"ground_feet": ground}
+                kwargs = prior_kwargs(env_id, weights_dir) | ({} if env_id.endswith("ClopsNav-v0") else {"ground_feet": ground})
                 cases.append((env_id, source, "on" if ground else "off (raw prior)", run(env_id, source, steps, seed, body, **kwargs)))
     lines = [
         "# Feet on the floor",
         "",
-        f"Command: `motion-envs bench floor --steps {steps}`. {machine_line()}",
+        f"Command: `motion-envs bench floor --steps {steps}{f' --weights-dir {weights_dir} --output {output}' if weights_dir else ''}`. "
+        f"Priors: {weights_dir or 'the shipped ones'}. {machine_line()}",
         "",
         f"{steps} env steps per row (episodes restart), one body, every generated frame measured. Floor rule: the",
         "env's `ground_feet` (ClopsNav always grounds its bodies). Targets: no frame below -3 cm; while walking",
@@ -197,10 +210,10 @@ def main(steps: int = 2000, seed: int = 0, episodes: int = 8) -> int:
         "| env, actions | episodes | median walk (s, at most 15) | head at 0.5-1.5 s | head over the walk's last second "
         "| lowest head |",
         "|---|---|---|---|---|---|",
-        *sinking_rows(episodes, seed, body),
+        *sinking_rows(episodes, seed, body, weights_dir),
     ]
     text = "\n".join(lines) + "\n"
     RESULTS.mkdir(parents=True, exist_ok=True)
-    atomic_write(RESULTS / "floor.md", lambda file: file.write(text.encode()))
+    atomic_write(RESULTS / f"{output}.md", lambda file: file.write(text.encode()))
     print(text)
     return 0

@@ -112,9 +112,11 @@ def random_motion(gamma: GammaGenerator, rollouts: int, primitives: int, seed: i
 
 
 def main(mocap_dir: Path | None = None, cache_dir: Path | None = None, subsets: tuple[str, ...] = SHIPPED_SUBSETS,
-         rollouts: int = 10, primitives: int = 20, seed: int = 0) -> int:  # fmt: skip
+         rollouts: int = 10, primitives: int = 20, seed: int = 0, weights_dir: Path | None = None,
+         output: str = "gamma_realism") -> int:  # fmt: skip
+    """`weights_dir`: the GAMMA weights to measure (default: the shipped ones); the table is `output`.md."""
     began = time.perf_counter()
-    body, gamma = BodyModel(), GammaGenerator.load()
+    body, gamma = BodyModel(), GammaGenerator.load(weights_dir or WEIGHTS_DIR)
     feet_rows, sole_rows = body.skin_rows(foot_vertex_ids()), body.skin_rows(sole_vertex_ids())
 
     def feet_of(transl: torch.Tensor, orient: torch.Tensor, pose: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -163,16 +165,17 @@ def main(mocap_dir: Path | None = None, cache_dir: Path | None = None, subsets: 
         "",
         *prior_lines(),
         machine_line(),
-        f"Command: `motion-envs bench gamma-realism`; {time.perf_counter() - began:.0f} s in all.",
+        f"Command: `motion-envs bench gamma-realism{f' --weights-dir {weights_dir} --output {output}' if weights_dir else ''}`; "
+        f"{time.perf_counter() - began:.0f} s in all.",
         "",
-        "![pelvis paths](gamma_realism_paths.png)",
+        f"![pelvis paths]({output}_paths.png)",
         "",
     ]
     text = "\n".join(lines)
     print(text)
     RESULTS.mkdir(parents=True, exist_ok=True)
-    atomic_write(RESULTS / "gamma_realism.md", lambda file: file.write(text.encode()))
+    atomic_write(RESULTS / f"{output}.md", lambda file: file.write(text.encode()))
     figure, axis = plt.subplots(figsize=(5, 5))
     top_down(axis, pelvis[:: max(1, rollouts // 2), :, :2].numpy(), title=f"pelvis paths, random z, {frames / GAMMA_FPS:.1f} s")
-    save(figure, RESULTS / "gamma_realism_paths.png", dpi=120)
+    save(figure, RESULTS / f"{output}_paths.png", dpi=120)
     return 0

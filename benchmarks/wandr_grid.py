@@ -107,6 +107,7 @@ VARIANTS = {  # weights file -> row label
     "wandr_wrist_pelvis.pt": "WANDR sampler, I^w + I^p",
     "wandr_wrist_orientation.pt": "WANDR sampler, I^w + I^r",
     "wandr_cmu_hdm05.pt": "WANDR sampler, trained on cmu + hdm05",
+    "wandr_clean.pt": "WANDR sampler, retrained on the cleaned data with the contact loss (priors/weights/clean/)",
 }
 
 

@@ -87,7 +87,7 @@ def _bench_cleanup_video(args: argparse.Namespace) -> int:
 def _bench_floor(args: argparse.Namespace) -> int:
     from benchmarks.floor import main as floor
 
-    return floor(steps=args.steps, seed=args.seed)
+    return floor(steps=args.steps, seed=args.seed, weights_dir=args.weights_dir, output=args.output or "floor")
 
 
 def _bench_speed(args: argparse.Namespace) -> int:
@@ -112,7 +112,8 @@ def _bench_gamma_realism(args: argparse.Namespace) -> int:
     from benchmarks.gamma_realism import main as gamma_realism
 
     return gamma_realism(mocap_dir=args.mocap_dir, cache_dir=args.cache_dir, subsets=_subsets(args),
-                         rollouts=args.rollouts, primitives=args.primitives, seed=args.seed)  # fmt: skip
+                         rollouts=args.rollouts, primitives=args.primitives, seed=args.seed, weights_dir=args.weights_dir,
+                         output=args.output or "gamma_realism")  # fmt: skip
 
 
 def _play(args: argparse.Namespace) -> int:
@@ -531,6 +532,9 @@ def parser() -> argparse.ArgumentParser:
     bench_floor = bench.add_parser("floor", help="feet on the floor in every env, with and without its floor rule (floor.md)")
     bench_floor.add_argument("--steps", type=int, default=2000, help="env steps per row")
     bench_floor.add_argument("--seed", type=int, default=0)
+    bench_floor.add_argument("--weights-dir", type=Path, default=None,
+                             help="priors to measure (e.g. motion_envs/priors/weights/clean; default: the shipped ones)")
+    bench_floor.add_argument("--output", default=None, help="result table name (default floor)")
     bench_floor.set_defaults(run=_bench_floor)
     bench.add_parser("speed", help="GAMMA rollout body-primitives/s by batch, fp32 and bf16 (throughput.md)").set_defaults(
         run=_bench_speed
@@ -544,6 +548,8 @@ def parser() -> argparse.ArgumentParser:
     realism = bench.add_parser("gamma-realism", help="random-latent GAMMA motion vs the data: contact score, FS")
     _add_data_args(realism, list(SHIPPED_SUBSETS))
     realism.add_argument("--rollouts", type=int, default=10, help="rollouts per shipped start pose")
+    realism.add_argument("--weights-dir", type=Path, default=None, help="GAMMA weights to measure (default: the shipped ones)")
+    realism.add_argument("--output", default=None, help="result table name (default gamma_realism)")
     realism.add_argument("--primitives", type=int, default=20)
     realism.add_argument("--seed", type=int, default=0)
     realism.set_defaults(run=_bench_gamma_realism)

@@ -31,6 +31,11 @@ from motion_envs.atomic import atomic_write
 from motion_envs.priors.checkpoint import load_checkpoint, save_checkpoint
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
+CLEAN_WEIGHTS_DIR = WEIGHTS_DIR / "clean"
+"""Priors retrained on the cleaned data (issue "Clean motion"), shipped beside the defaults until the agents are
+retrained on them: every shipped policy was trained on the defaults, and a policy acts in its own prior's latent
+space (the WandrReach PPO policy reaches 6.7% on the retrained WANDR prior against 88.9% on its own). Envs take
+them by path (`weights_dir=` / `weights=`)."""
 
 Batch = TypeVar("Batch")
 
@@ -175,15 +180,16 @@ def ship(model: nn.Module, weights: Path, entry: dict[str, Any]) -> dict[str, An
     return entry
 
 
-def ship_trained(weights: Path) -> Path:
+def ship_trained(weights: Path, folder: Path | None = None) -> Path:
     """Copy finished weights of a run folder (and their record in the manifest beside them) into the package's
-    priors/weights/, naming what they replace; returns the shipped path."""
+    priors/weights/ (or `folder`, with its own manifest), naming what they replace; returns the shipped path."""
     weights = Path(weights)
     manifest_path = weights.parent / "manifest.json"
     record = json.loads(manifest_path.read_text()).get(weights.name) if manifest_path.exists() else None
     if record is None:
         raise FileNotFoundError(f"{weights} has no record in {manifest_path}; ship only what a train command wrote")
-    shipped = WEIGHTS_DIR / weights.name
+    shipped = Path(folder or WEIGHTS_DIR) / weights.name
+    shipped.parent.mkdir(parents=True, exist_ok=True)
     announce_replacement(shipped)
     data = weights.read_bytes()
     atomic_write(shipped, lambda file: file.write(data))

@@ -41,3 +41,23 @@ def test_finished_stages_are_skipped_and_shipped_with_their_record(tmp_path, mon
     assert "gamma_pose_vae: done" in capsys.readouterr().out
     assert (shipped / stage.weights).read_bytes() == b"weights"
     assert json.loads((shipped / "manifest.json").read_text())[stage.weights]["command"].endswith("pose-vae")
+
+
+def test_the_clean_priors_load_in_their_envs_and_record_their_data():
+    """The retrained priors ship beside the defaults (priors/weights/clean/) and run where envs are told to
+    load them; each has a manifest record naming its data cache and command."""
+    import gymnasium as gym
+    import numpy as np
+
+    import motion_envs  # noqa: F401  (registers the ids)
+    from motion_envs.priors.training import CLEAN_WEIGHTS_DIR
+
+    manifest = json.loads((CLEAN_WEIGHTS_DIR / "manifest.json").read_text())
+    options = {"wandr.pt": ("motion_envs/WandrReach-v0", "weights"), "clops.pt": ("motion_envs/ClopsNav-v0", "weights")}
+    for name, (env_id, option) in options.items():
+        assert manifest[name]["data_hash"].startswith("motion_30fps_") and "train" in manifest[name]["command"]
+        env = gym.make(env_id, **{option: str(CLEAN_WEIGHTS_DIR / name)})
+        env.reset(seed=0)
+        env.action_space.seed(0)
+        _, reward, *_ = env.step(env.action_space.sample())
+        assert np.isfinite(reward)

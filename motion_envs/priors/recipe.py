@@ -52,16 +52,16 @@ class Stage:
 
 RECIPE: tuple[Stage, ...] = (
     Stage("wandr", ("wandr", "--epochs", "40", "--window-stride", "2", "--late-kl-weight", "0.1", "--kl-raise-epoch", "22"),
-          "wandr.pt", None),
-    Stage("clops_stage1", ("clops", "--prior-init", "{wandr}"), "clops.pt", None, needs=("wandr",), ships=False),
-    Stage("clops", ("clops", "--prior-init", "{clops_stage1}", "--max-rollout", "30", "--epochs", "6"), "clops.pt", None,
+          "wandr.pt", 20),
+    Stage("clops_stage1", ("clops", "--prior-init", "{wandr}"), "clops.pt", 6, needs=("wandr",), ships=False),
+    Stage("clops", ("clops", "--prior-init", "{clops_stage1}", "--max-rollout", "30", "--epochs", "6"), "clops.pt", 7,
           needs=("clops_stage1",)),
     Stage("gamma_predictor_1f", ("gamma", "--stage", "predictor", "--seed-frames", "1", "--epochs", "25", "--rollout-epochs", "3"),
-          "gamma_predictor_1f.pt", None),
+          "gamma_predictor_1f.pt", 25),
     Stage("gamma_predictor_2f", ("gamma", "--stage", "predictor", "--seed-frames", "2", "--epochs", "25", "--rollout-epochs", "3"),
-          "gamma_predictor_2f.pt", None),
+          "gamma_predictor_2f.pt", 25),
     Stage("gamma_regressor", ("gamma", "--stage", "regressor", "--epochs", "46", "--batch-size", "16", "--window-stride", "4"),
-          "gamma_regressor.pt", None),
+          "gamma_regressor.pt", 20),
     Stage("gamma_pose_vae", ("gamma", "--stage", "pose-vae", "--epochs", "20"), "gamma_pose_vae.pt", None),
     Stage("gamma_g_cvae_2f", ("gamma", "--stage", "g-cvae", "--epochs", "12"), "gamma_g_cvae_2f.pt", None),
 )  # fmt: skip

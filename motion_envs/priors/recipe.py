@@ -62,7 +62,7 @@ RECIPE: tuple[Stage, ...] = (
           "gamma_predictor_2f.pt", 25),
     Stage("gamma_regressor", ("gamma", "--stage", "regressor", "--epochs", "46", "--batch-size", "16", "--window-stride", "4"),
           "gamma_regressor.pt", 20),
-    Stage("gamma_pose_vae", ("gamma", "--stage", "pose-vae", "--epochs", "20"), "gamma_pose_vae.pt", None),
+    Stage("gamma_pose_vae", ("gamma", "--stage", "pose-vae", "--epochs", "20"), "gamma_pose_vae.pt", 1),
     Stage("gamma_g_cvae_2f", ("gamma", "--stage", "g-cvae", "--epochs", "12"), "gamma_g_cvae_2f.pt", None),
 )  # fmt: skip
 """The shipped priors' recipe, in an order that respects `needs`."""

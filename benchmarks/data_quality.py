@@ -253,7 +253,33 @@ def retarget_figure(mocap_dir: Path, destination: Path) -> None:
     save(figure, destination, dpi=90)
 
 
-def main(mocap_dir: Path | None = None, cache_dir: Path | None = None, subsets: tuple[str, ...] = SHIPPED_SUBSETS) -> int:
+def timing_lines(mocap_dir: Path) -> list[str]:
+    """The BVH reader against bvhio and FK + markers against mannequin-x, as Markdown lines."""
+    speed_rows = reader_speed(mocap_dir)
+    speed = fk_throughput()
+    return [
+        "## BVH reader (ours, vectorised numpy) vs bvhio",
+        "",
+        "| file | ours (parse + FK-ready) | bvhio readAsHierarchy | max joint gap (mid frame) |",
+        "|---|---|---|---|",
+        *speed_rows,
+        "",
+        "## Forward kinematics + 67 markers, batch 4,096 poses, CPU",
+        "",
+        "| implementation | poses/s | ratio |",
+        "|---|---|---|",
+        f"| motion_envs torch FK + 67-marker skinning | {speed['ours']:,.0f} | {speed['ours'] / speed['mannequin']:.1f}x |",
+        f"| motion_envs torch FK (22 joints) | {speed['ours_joints']:,.0f} | {speed['ours_joints'] / speed['mannequin']:.1f}x |",
+        f"| mannequin-x numpy `joint_transforms` (joints only) | {speed['mannequin']:,.0f} | 1.0x |",
+        "",
+        "Median of `torch.utils.benchmark` blocks (3 s each), axis-angle input, float32, inference mode.",
+        "mannequin-x computes all 54 joints (hands too) in float32 numpy. Target: >= 300,000 poses/s.",
+    ]
+
+
+def main(mocap_dir: Path | None = None, cache_dir: Path | None = None, subsets: tuple[str, ...] = SHIPPED_SUBSETS,
+         timing: bool = True) -> int:  # fmt: skip
+    """`timing=False` (`--no-timing`) leaves out the reader and FK speed sections (for a machine that is busy)."""
     mocap_dir = Path(mocap_dir or default_mocap_dir() or "")
     RESULTS.mkdir(parents=True, exist_ok=True)
     report = build(mocap_dir=mocap_dir, cache_dir=cache_dir, subsets=subsets)
@@ -266,7 +292,7 @@ def main(mocap_dir: Path | None = None, cache_dir: Path | None = None, subsets: 
     lines = [
         "# Data quality",
         "",
-        f"Command: `motion-envs bench data`. {machine_line()}",
+        f"Command: `motion-envs bench data{'' if timing else ' --no-timing'}`. {machine_line()}",
         f"Source: `{mocap_dir}` subsets {list(subsets)}; cache `{report.caches[30].name}` (uncleaned: "
         f"`{raw_report.caches[30].name}`). {len(report.failures)} clips skipped.",
         "",
@@ -319,27 +345,9 @@ def main(mocap_dir: Path | None = None, cache_dir: Path | None = None, subsets: 
         "",
         "Error: distance between the body's joints and the scaled source joints carrying their constant",
         "rest-placement offsets (see `motion_envs/data/retarget.py`). Figure: `data_quality_retarget.png`.",
-        "",
-        "## BVH reader (ours, vectorised numpy) vs bvhio",
-        "",
-        "| file | ours (parse + FK-ready) | bvhio readAsHierarchy | max joint gap (mid frame) |",
-        "|---|---|---|---|",
-        *reader_speed(mocap_dir),
-        "",
-        "## Forward kinematics + 67 markers, batch 4,096 poses, CPU",
-        "",
+        ""
     ]
-    speed = fk_throughput()
-    lines += [
-        "| implementation | poses/s | ratio |",
-        "|---|---|---|",
-        f"| motion_envs torch FK + 67-marker skinning | {speed['ours']:,.0f} | {speed['ours'] / speed['mannequin']:.1f}x |",
-        f"| motion_envs torch FK (22 joints) | {speed['ours_joints']:,.0f} | {speed['ours_joints'] / speed['mannequin']:.1f}x |",
-        f"| mannequin-x numpy `joint_transforms` (joints only) | {speed['mannequin']:,.0f} | 1.0x |",
-        "",
-        "Median of `torch.utils.benchmark` blocks (3 s each), axis-angle input, float32, inference mode.",
-        "mannequin-x computes all 54 joints (hands too) in float32 numpy. Target: >= 300,000 poses/s.",
-    ]
+    lines += timing_lines(mocap_dir) if timing else ["## Reader and FK speed", "", "Not measured in this run (`--no-timing`)."]
     text = "\n".join(lines) + "\n"
     atomic_write(RESULTS / "data_quality.md", lambda file: file.write(text.encode()))
     retarget_figure(mocap_dir, RESULTS / "data_quality_retarget.png")

@@ -42,7 +42,7 @@ def _data_start_poses(args: argparse.Namespace) -> int:
 def _bench_data(args: argparse.Namespace) -> int:
     from benchmarks.data_quality import main as data_quality
 
-    return data_quality(mocap_dir=args.mocap_dir, cache_dir=args.cache_dir, subsets=_subsets(args))
+    return data_quality(mocap_dir=args.mocap_dir, cache_dir=args.cache_dir, subsets=_subsets(args), timing=not args.no_timing)
 
 
 def _bench_gamma(args: argparse.Namespace) -> int:
@@ -496,6 +496,7 @@ def parser() -> argparse.ArgumentParser:
     )
     bench_data = bench.add_parser("data", help="data quality: clips, retarget error, foot skating, FK speed")
     _add_data_args(bench_data, list(SHIPPED_SUBSETS))
+    bench_data.add_argument("--no-timing", action="store_true", help="leave out the reader and FK speed sections (busy machine)")
     bench_data.set_defaults(run=_bench_data)
     bench_gamma = bench.add_parser("gamma", help="GAMMA goal reaching (Table 1 protocol) with the shipped weights")
     bench_gamma.add_argument("--quick", action="store_true", help="20 pairs x 8 clones: a few minutes")

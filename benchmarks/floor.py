@@ -164,13 +164,20 @@ def sinking_rows(episodes: int, seed: int, body: BodyModel, weights_dir: Path | 
     return rows
 
 
+def prior_files(env_id: str, weights_dir: Path) -> list[Path]:
+    """The weight files an env loads from `weights_dir`."""
+    if env_id.endswith("GammaReach-v0"):
+        return [weights_dir / f"gamma_{name}.pt" for name in ("predictor_1f", "predictor_2f", "regressor", "pose_vae")]
+    return [weights_dir / ("wandr.pt" if env_id.endswith("WandrReach-v0") else "clops.pt")]
+
+
 def prior_kwargs(env_id: str, weights_dir: Path | None) -> dict:
     """gym.make options that load the priors of `weights_dir` (nothing for the shipped ones)."""
     if weights_dir is None:
         return {}
     if env_id.endswith("GammaReach-v0"):
         return {"weights_dir": str(weights_dir)}
-    return {"weights": str(weights_dir / ("wandr.pt" if env_id.endswith("WandrReach-v0") else "clops.pt"))}
+    return {"weights": str(prior_files(env_id, weights_dir)[0])}
 
 
 def main(steps: int = 2000, seed: int = 0, episodes: int = 8, weights_dir: Path | None = None, output: str = "floor") -> int:
@@ -179,6 +186,8 @@ def main(steps: int = 2000, seed: int = 0, episodes: int = 8, weights_dir: Path 
     body = BodyModel()
     cases = []
     for env_id in POLICIES:
+        if weights_dir is not None and not all(Path(v).exists() for v in prior_files(env_id, weights_dir)):
+            continue  # that env's prior is not in weights_dir
         sources = ("uniform", "policy") if env_id.endswith("ClopsNav-v0") else ("uniform", "normal", "policy")
         sources = tuple(s for s in sources if weights_dir is None or s != "policy")
         rules = ((True,),) if env_id.endswith("ClopsNav-v0") else ((True,), (False,))

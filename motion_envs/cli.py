@@ -485,7 +485,7 @@ def parser() -> argparse.ArgumentParser:
                        help="wandr, clops: prior weights to start from, or 'scratch' (default: wandr scratch, clops the shipped wandr.pt)")
     train.add_argument("--contact-weight", type=float, default=None,
                        help="gamma predictor, wandr, clops: weight of the contact loss (stance feet held still where the "
-                            "cleaned data labels contact; default 3 for gamma, 1 for wandr/clops; 0: off)")  # fmt: skip
+                            "cleaned data labels contact; default 0 (off) for gamma, 1 for wandr/clops)")  # fmt: skip
     train.add_argument("--device", default=None, help="ppo, dqn: where the policy and the prior run (default cpu; cuda)")
     train.add_argument("--seed", type=int, default=None)
     _add_data_args(train, list(SHIPPED_SUBSETS))

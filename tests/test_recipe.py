@@ -53,10 +53,11 @@ def test_the_clean_priors_load_in_their_envs_and_record_their_data():
     from motion_envs.priors.training import CLEAN_WEIGHTS_DIR
 
     manifest = json.loads((CLEAN_WEIGHTS_DIR / "manifest.json").read_text())
-    options = {"wandr.pt": ("motion_envs/WandrReach-v0", "weights"), "clops.pt": ("motion_envs/ClopsNav-v0", "weights")}
+    options = {"wandr.pt": ("motion_envs/WandrReach-v0", "weights"), "clops.pt": ("motion_envs/ClopsNav-v0", "weights"),
+               "gamma_predictor_2f.pt": ("motion_envs/GammaReach-v0", "weights_dir")}  # fmt: skip
     for name, (env_id, option) in options.items():
-        assert manifest[name]["data_hash"].startswith("motion_30fps_") and "train" in manifest[name]["command"]
-        env = gym.make(env_id, **{option: str(CLEAN_WEIGHTS_DIR / name)})
+        assert manifest[name]["data_hash"].startswith("motion_") and "train" in manifest[name]["command"]
+        env = gym.make(env_id, **{option: str(CLEAN_WEIGHTS_DIR / name if option == "weights" else CLEAN_WEIGHTS_DIR)})
         env.reset(seed=0)
         env.action_space.seed(0)
         _, reward, *_ = env.step(env.action_space.sample())

@@ -15,18 +15,19 @@ import torch
 from agents.policy_files import PolicyFileError, expect_policy
 from agents.ppo_kl import PPOKL
 from motion_envs.batched import BatchedState
+from motion_envs.counter_random import BodyNoise
 from motion_envs.envs.core import BatchedCore
 
 
 class PolicyLatent:
-    """A saved PPOKL policy. Sampled latents by default, as the paper (its release does not use the mean).
-    `file` says what it was trained for (`agents.policy_files`); a file of another kind fails here, by name."""
+    """A saved PPOKL policy. Sampled latents by default, as the paper (its release does not use the mean); a body's
+    noise depends only on the seed and its index in `bodies` (`BodyNoise`). `file` says what it was trained for (`agents.policy_files`); a file of another kind fails here, by name."""
 
-    def __init__(self, path: str | Path, deterministic: bool = False, seed: int = 0) -> None:
+    def __init__(self, path: str | Path, deterministic: bool = False, seed: int = 0, bodies: torch.Tensor | None = None) -> None:
         self.file = expect_policy(path, "ppo_policy")
         self.model = PPOKL.load(path, device="cpu")
         self.deterministic = deterministic
-        self.generator = torch.Generator().manual_seed(seed)
+        self.noise = BodyNoise(seed, bodies)
 
     @torch.no_grad()
     def __call__(self, core: BatchedCore, state: BatchedState) -> torch.Tensor:
@@ -38,5 +39,5 @@ class PolicyLatent:
         distribution = self.model.policy.get_distribution(observations).distribution
         if self.deterministic:
             return distribution.loc.cpu()
-        noise = torch.randn(distribution.loc.shape, generator=self.generator)
+        noise = self.noise(*distribution.loc.shape)
         return (distribution.loc + distribution.scale * noise.to(distribution.loc.device)).cpu()

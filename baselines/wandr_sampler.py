@@ -14,6 +14,7 @@ from collections.abc import Callable
 import torch
 from tqdm import tqdm
 
+from motion_envs.counter_random import BodyNoise
 from motion_envs.envs.wandr_reach import WandrReachCore, WandrReachState
 
 Controller = Callable[[WandrReachCore, WandrReachState], torch.Tensor]
@@ -21,16 +22,17 @@ Controller = Callable[[WandrReachCore, WandrReachState], torch.Tensor]
 
 
 class WandrSampler:
-    """z ~ N(0, σ² I) for every body and step."""
+    """z ~ N(0, σ² I) for every body and step; a body's draws depend only on the seed and its index in `bodies`
+    (`motion_envs.counter_random.BodyNoise`), so shards of a batch draw what the whole batch would."""
 
-    def __init__(self, sigma: float = 1.0, seed: int = 0) -> None:
+    def __init__(self, sigma: float = 1.0, seed: int = 0, bodies: torch.Tensor | None = None) -> None:
         if not sigma >= 0:
             raise ValueError(f"sigma must be non-negative, got {sigma}")
         self.sigma = sigma
-        self.generator = torch.Generator().manual_seed(seed)
+        self.noise = BodyNoise(seed, bodies)
 
     def __call__(self, core: WandrReachCore, state: WandrReachState) -> torch.Tensor:
-        return self.sigma * torch.randn(state.num_bodies, core.prior.config.latent, generator=self.generator)
+        return self.sigma * self.noise(state.num_bodies, core.prior.config.latent)
 
 
 def roll_out(core: WandrReachCore, state: WandrReachState, controller: Controller, progress: bool = False,

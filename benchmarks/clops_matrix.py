@@ -24,6 +24,7 @@ goal pixels red) over its top-down path, and the SR matrix.
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -34,6 +35,7 @@ import torch
 
 from agents.policy_files import OBSERVATION_FLAGS, read_policy_file
 from agents.train_dqn import OBSERVATION_OPTIONS
+from benchmarks.fanout import run_tasks
 from benchmarks.machine import machine_line
 from benchmarks.sections import replace_section
 from motion_envs.atomic import atomic_write
@@ -92,14 +94,62 @@ def policy_actions(path: Path) -> Controller:
     return act
 
 
-def episodes(core: ClopsNavCore, count: int) -> ClopsNavState:
-    """The family's first `count` test seeds, one episode each (episode seed = scene seed)."""
-    seeds = list(TEST_SEEDS)[:count]
+def episodes(core: ClopsNavCore, count: int | range) -> ClopsNavState:
+    """The family's first `count` test seeds, or those numbered in a range, one episode each (episode seed = scene
+    seed; episode i is the same either way)."""
+    seeds = list(TEST_SEEDS)[:count] if isinstance(count, int) else [TEST_SEEDS[index] for index in count]
     return core.sample_initial_state([np.random.default_rng(seed) for seed in seeds], {"scene_seed": seeds})
 
 
-def run(core: ClopsNavCore, state: ClopsNavState, controller: Controller) -> Scores:
-    """Step every episode to its end (found or 15 s); frozen bodies are not counted after their end."""
+EPISODES_PER_TASK = 25
+"""Episodes per task: a row runs each family as groups of this many episodes, one after another in this process
+or as Ray tasks (`benchmarks.fanout`); random actions are seeded per group, so the numbers do not depend on where
+a group ran."""
+CONTROLLERS = ("random", "gamma", "dqn")
+
+
+@dataclass(frozen=True)
+class ClopsRow:
+    """A row as a task rebuilds it: "random" actions, the "gamma" navigator, or a "dqn" policy; the env's
+    observation options (names of `OBSERVATION_FLAGS` set true)."""
+
+    controller: str
+    policy: Path | None = None
+    options: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        if self.controller not in CONTROLLERS:
+            raise ValueError(f"controller must be one of {CONTROLLERS}, got {self.controller!r}")
+
+
+@functools.lru_cache(maxsize=8)
+def cached_core(family: str, options: tuple[str, ...]) -> ClopsNavCore:
+    """One test-split core per process, family and observation (its rooms are built once)."""
+    return ClopsNavCore(ClopsNavConfig(family=family, split="test", **{name: True for name in options}))
+
+
+def run_shard(row: ClopsRow, family: str, first: int, last: int, seed: int) -> dict:
+    """Episodes [first, last) of `family` under the row's controller: `run`'s (or `gamma_row`'s) counts."""
+    core = cached_core(family, row.options)
+    state = episodes(core, range(first, last))
+    if row.controller == "gamma":
+        return gamma_row(core, state)
+    controller = random_actions(seed * 1_000_003 + first) if row.controller == "random" else policy_actions(row.policy)
+    return run(core, state, controller)
+
+
+def scores_of(parts: list[dict]) -> Scores:
+    """A row's scores on one family from its groups in order (paths and views: the first group's)."""
+    found = np.concatenate([part["found"] for part in parts])
+    collided, skated = (tuple(map(sum, zip(*(part[key] for part in parts)))) for key in ("collided", "skated"))
+    return Scores(100 * float(found.mean()), 100 * collided[0] / max(collided[1], 1), 100 * skated[0] / max(skated[1], 1),
+                  float(np.concatenate([part["seconds"] for part in parts]).mean()), parts[0]["paths"], parts[0]["views"])  # fmt: skip
+
+
+def run(core: ClopsNavCore, state: ClopsNavState, controller: Controller) -> dict:
+    """Step every episode to its end (found or 15 s); frozen bodies are not counted after their end. Returns the
+    counts `scores_of` merges: found (N,), (collided, actions) and (skated, frames) sums, seconds (N,), the pelvis
+    paths (N, T, 2) and episode 0's views."""
     count = state.num_bodies
     alive = torch.ones(count, dtype=torch.bool)
     actions, collided = torch.zeros(count), torch.zeros(count)
@@ -112,45 +162,50 @@ def run(core: ClopsNavCore, state: ClopsNavState, controller: Controller) -> Sco
         if alive[0]:
             views.append(state.view[0].numpy())
         alive &= ~(result.terminated | result.truncated)
-    return Scores(100 * float(state.found.float().mean()), 100 * float(collided.sum() / actions.sum()),
-                  100 * float(state.skated.sum() / state.frame.sum()), float(state.frame.float().mean()) / 30,
-                  np.stack(paths, 1), views)  # fmt: skip
+    return {"found": state.found.numpy(), "collided": (float(collided.sum()), float(actions.sum())),
+            "skated": (float(state.skated.sum()), float(state.frame.sum())), "seconds": state.frame.float().numpy() / 30,
+            "paths": np.stack(paths, 1), "views": views}  # fmt: skip
 
 
-def gamma_row(core: ClopsNavCore, state: ClopsNavState) -> Scores:
+def gamma_row(core: ClopsNavCore, state: ClopsNavState) -> dict:
+    """The GAMMA navigator's counts, as `run`'s (collisions per second of motion; no views)."""
     from agents.ppo_kl import PPOKL
     from baselines.gamma_navigator import gamma_navigate
 
     stats = gamma_navigate(core, state, PPOKL.load(GAMMA_POLICY, device="cpu"))
-    return Scores(100 * float(stats.found.mean()), 100 * float(stats.collided_seconds.sum() / max(stats.seconds.sum(), 1)),
-                  100 * float(stats.skated.sum() / max(stats.frames.sum(), 1)), float(stats.seconds.mean()), stats.paths, [])  # fmt: skip
+    return {"found": np.asarray(stats.found), "collided": (float(stats.collided_seconds.sum()), float(stats.seconds.sum())),
+            "skated": (float(stats.skated.sum()), float(stats.frames.sum())), "seconds": np.asarray(stats.seconds, dtype=float),
+            "paths": stats.paths, "views": []}  # fmt: skip
 
 
-def main(episodes_per_family: int = 100, families: tuple[str, ...] = tuple(FAMILIES), seed: int = 0) -> int:
+def matrix_rows(policies: dict[str, Path]) -> dict[str, ClopsRow]:
+    """Every row ({label: ClopsRow}): random actions, the GAMMA navigator, and each DQN policy with its observation."""
+    rows = {"random actions": ClopsRow("random"), "GAMMA navigator, known goal (EgoGen-like)": ClopsRow("gamma")}
+    for suffix, (label_suffix, options) in OBSERVATIONS.items():
+        for name, path in policies.items():
+            if observation_of(path) == suffix:
+                rows[f"CLOPS DQN trained on {name.removesuffix(suffix)}{label_suffix}"] = ClopsRow("dqn", path, tuple(options))
+    return rows
+
+
+def main(episodes_per_family: int = 100, families: tuple[str, ...] = tuple(FAMILIES), seed: int = 0,
+         ray_address: str | None = None) -> int:  # fmt: skip
+    """Every row on every family's test seeds; `ray_address`: fan the episode groups out over Ray ("local" or a
+    cluster's address)."""
     torch.manual_seed(seed)
     policies = {path.stem.removeprefix("dqn_clopsnav_"): path for path in sorted(WEIGHTS_DIR.glob("dqn_clopsnav_*.zip"))}
-    rows: dict[str, dict[str, Scores]] = {}
+    groups = [(first, min(first + EPISODES_PER_TASK, episodes_per_family))
+              for first in range(0, episodes_per_family, EPISODES_PER_TASK)]  # fmt: skip
+    tasks = [((label, family), (row, family, first, last, seed)) for family in families
+             for label, row in matrix_rows(policies).items() for first, last in groups]  # fmt: skip
     started = time.perf_counter()
-    for family in families:
-        for suffix, (label_suffix, options) in OBSERVATIONS.items():
-            observed = {name: path for name, path in policies.items() if observation_of(path) == suffix}
-            if suffix and not observed:
-                continue
-            core = ClopsNavCore(ClopsNavConfig(family=family, split="test", **options))
-            state = episodes(core, episodes_per_family)
-            controllers: dict[str, Callable[[], Scores]] = {}
-            if not suffix:
-                controllers["random actions"] = lambda: run(core, state.clone(), random_actions(seed))
-                controllers["GAMMA navigator, known goal (EgoGen-like)"] = lambda: gamma_row(core, state.clone())
-            for name, path in observed.items():
-                label = f"CLOPS DQN trained on {name.removesuffix(suffix)}{label_suffix}"
-                controllers[label] = lambda path=path: run(core, state.clone(), policy_actions(path))
-            for label, evaluate in controllers.items():
-                tick = time.perf_counter()
-                rows.setdefault(label, {})[family] = scores = evaluate()
-                print(f"{label} on {family}: SR {scores.success:.0f}%  Col {scores.collision:.0f}%  FS {scores.skating:.0f}%"
-                      f"  ({time.perf_counter() - tick:.0f} s)")  # fmt: skip
-    write_results(rows, families, episodes_per_family, time.perf_counter() - started)
+    results = run_tasks(run_shard, [arguments for _, arguments in tasks], ray_address, "clops episode groups")
+    rows: dict[str, dict[str, Scores]] = {}
+    for label, family in dict.fromkeys(key for key, _ in tasks):
+        rows.setdefault(label, {})[family] = scores = scores_of([result for (key, _), result in zip(tasks, results)
+                                                                 if key == (label, family)])  # fmt: skip
+        print(f"{label} on {family}: SR {scores.success:.0f}%  Col {scores.collision:.0f}%  FS {scores.skating:.0f}%")
+    write_results(rows, families, episodes_per_family, time.perf_counter() - started, ray_address)
     throughput_section(ClopsNavCore(ClopsNavConfig(family=families[0], split="test")), bodies=64, actions=3)
     return 0
 
@@ -174,11 +229,14 @@ def trained_on(label: str) -> str | None:
     return family
 
 
-def write_results(rows: dict[str, dict[str, Scores]], families: tuple[str, ...], count: int, wall: float) -> None:
+def write_results(rows: dict[str, dict[str, Scores]], families: tuple[str, ...], count: int, wall: float,
+                  ray_address: str | None = None) -> None:  # fmt: skip
     lines = [
         "# CLOPS scene matrix", "",
         f"{count} episodes per family (its held-out test seeds {TEST_SEEDS.start}-{TEST_SEEDS.start + count - 1}, one each), "
-        f"15 s each, the same episodes for every row. `motion-envs bench clops` ({wall / 60:.0f} min).",
+        f"15 s each, the same episodes for every row, in groups of {EPISODES_PER_TASK} (`benchmarks.fanout`) run "
+        + ("in this process" if ray_address is None else f"as Ray tasks ({ray_address})")
+        + f". `motion-envs bench clops{'' if ray_address is None else ' --ray ' + ray_address}` ({wall / 60:.0f} min).",
         machine_line(), "",
         "SR: goal within 1 m and in view (%); Col: actions with a collision (%); FS: frames whose lowest foot vertex slid > 0.66 cm (%).",
         "Home SR: on the held-out rooms of the family a policy was trained on; elsewhere: mean SR over the other families "

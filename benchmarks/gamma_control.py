@@ -29,8 +29,10 @@ top-down plot of the first clone (or chosen branch) per pair.
 
 from __future__ import annotations
 
+import functools
 import itertools
 import time
+from dataclasses import dataclass
 from collections.abc import Callable
 from pathlib import Path
 
@@ -41,6 +43,7 @@ from tqdm import tqdm
 from agents.controllers import PolicyLatent
 from baselines.g_cvae import G_CVAE_WEIGHTS, goal_cvae_generator
 from baselines.latent_controllers import RandomLatent
+from benchmarks.fanout import run_tasks
 from benchmarks.machine import machine_line
 from motion_envs.plots import grid_of_axes, save, top_down
 from motion_envs.atomic import atomic_write
@@ -63,9 +66,9 @@ PAPER_ROWS = {  # GAMMA Table 1: steps, success rate, avg. dist., contact score
 Controller = Callable[[GammaReachCore, GammaReachState], torch.Tensor]
 
 
-def fixed_pairs(core: GammaReachCore, pairs: int, seed: int) -> GammaReachState:
-    """`pairs` seeded body-goal pairs."""
-    rngs = [np.random.default_rng([seed, pair]) for pair in range(pairs)]
+def fixed_pairs(core: GammaReachCore, pairs: int | range, seed: int) -> GammaReachState:
+    """Seeded body-goal pairs: the first `pairs`, or those numbered in a range (pair i is the same either way)."""
+    rngs = [np.random.default_rng([seed, pair]) for pair in (range(pairs) if isinstance(pairs, int) else pairs)]
     return core.sample_initial_state(rngs)
 
 
@@ -89,14 +92,26 @@ class Recorder:
         self.paths[rows, step + 1] = primitive.joints[::every, -1, PELVIS, :2].cpu()
 
     def row(self, steps: torch.Tensor, reached: torch.Tensor, distance: torch.Tensor) -> dict:
-        return {
-            "steps": float(steps[reached].float().mean()) if reached.any() else float("nan"),
-            "success rate": float(reached.float().mean()),
-            "avg. dist.": float(distance.mean()),
-            "contact score": float(torch.cat(self.contact).mean()),
-            "FS": float(torch.cat(self.skating).mean()),
-            "paths": self.paths.numpy(),
-        }
+        """The pairs' figures as `summarise` merges them: per pair (steps, reached, distance, paths) and the
+        per-primitive contact scores and skating flags as sums and counts."""
+        contact, skating = torch.cat(self.contact), torch.cat(self.skating)
+        return {"steps": steps.numpy(), "reached": reached.numpy(), "distance": distance.numpy(), "paths": self.paths.numpy(),
+                "contact": (float(contact.sum()), len(contact)), "skating": (float(skating.sum()), len(skating))}  # fmt: skip
+
+
+def summarise(parts: list[dict]) -> dict:
+    """A row's figures from its shards' `Recorder.row`s, in pair order."""
+    steps, reached = np.concatenate([part["steps"] for part in parts]), np.concatenate([part["reached"] for part in parts])
+    contact, skating = (tuple(map(sum, zip(*(part[key] for part in parts)))) for key in ("contact", "skating"))
+    return {
+        "steps": float(steps[reached].mean()) if reached.any() else float("nan"),
+        "success rate": float(reached.mean()),
+        "avg. dist.": float(np.concatenate([part["distance"] for part in parts]).mean()),
+        "contact score": contact[0] / contact[1],
+        "FS": skating[0] / skating[1],
+        "paths": np.concatenate([part["paths"] for part in parts]),
+        "seconds": sum(part.get("seconds", 0.0) for part in parts),
+    }
 
 
 @torch.no_grad()
@@ -146,52 +161,103 @@ BF16_CHECK = (20, 8)
 """Pairs and clones of the bf16 check (the networks run ~10x slower in bf16 on CPUs without bf16 units)."""
 
 
-def timed_rows(runs: dict[str, Callable[[], dict]]) -> tuple[dict[str, dict], dict[str, float]]:
-    rows, seconds = {}, {}
-    for name, run in runs.items():
-        tick = time.perf_counter()
-        rows[name] = run()
-        seconds[name] = time.perf_counter() - tick
-        print(f"{name}: success {rows[name]['success rate']:.2f} in {seconds[name]:.0f} s")
-    return rows, seconds
+PAIRS_PER_TASK = 25
+"""Pairs per task: every row runs as groups of this many pairs (× clones), one after another in this process
+or as Ray tasks (`benchmarks.fanout`), each group's latents seeded by the group, so a row's numbers do not
+depend on where it ran."""
+CONTROLLERS = ("random", "g-cvae", "policy")
 
 
-def table(rows: dict[str, dict], seconds: dict[str, float], paper: dict[str, tuple] | None = None) -> list[str]:
+@dataclass(frozen=True)
+class GammaRow:
+    """A table row as a task rebuilds it. controller: "random" (z ~ N(0, I)), "g-cvae" (the same through the
+    goal-conditioned CVAE) or "policy" (`PolicyLatent(policy)`); keep: None for the clones protocol, K for
+    a tree search keeping K nodes with `cost` ("release" or "distance")."""
+
+    controller: str
+    policy: Path | None = None
+    keep: int | None = None
+    cost: str = "release"
+    clones: int = 32
+    precision: str = "auto"
+
+    def __post_init__(self) -> None:
+        if self.controller not in CONTROLLERS:
+            raise ValueError(f"controller must be one of {CONTROLLERS}, got {self.controller!r}")
+
+
+@functools.lru_cache(maxsize=4)
+def cached_core(precision: str, goal_cvae: bool) -> GammaReachCore:
+    """One env core per process and setting (cores are stateless between rollouts; loading the prior is not free)."""
+    core = GammaReachCore(GammaReachConfig(precision=precision))
+    return GammaReachCore(GammaReachConfig(), goal_cvae_generator(base=core.generator)) if goal_cvae else core
+
+
+def run_shard(row: GammaRow, first: int, last: int, seed: int) -> dict:
+    """Pairs [first, last) of the row (`Recorder.row`'s figures, plus the task's seconds)."""
+    began = time.perf_counter()
+    core = cached_core(row.precision, row.controller == "g-cvae")
+    start = fixed_pairs(core, range(first, last), seed)
+    shard_seed = seed * 1_000_003 + first
+    proposal = PolicyLatent(row.policy, seed=shard_seed) if row.controller == "policy" else RandomLatent(shard_seed)
+    if row.keep is None:
+        result = run_clones(core, start, proposal, row.clones)
+    else:
+        cost = SearchCost() if row.cost == "release" else SearchCost.distance_only()
+        result = run_search(core, start, proposal, SearchSettings(keep=row.keep, cost=cost))
+    return {**result, "seconds": time.perf_counter() - began}
+
+
+def run_rows(rows: dict[str, GammaRow], pairs: int, seed: int, ray_address: str | None = None) -> dict[str, dict]:
+    """Every row's figures (`summarise`), its pair groups run in this process or over Ray."""
+    groups = [(first, min(first + PAIRS_PER_TASK, pairs)) for first in range(0, pairs, PAIRS_PER_TASK)]
+    tasks = [(label, (row, first, last, seed)) for label, row in rows.items() for first, last in groups]
+    results = run_tasks(run_shard, [arguments for _, arguments in tasks], ray_address, "gamma pair groups")
+    merged = {label: summarise([result for (task_label, _), result in zip(tasks, results) if task_label == label])
+              for label in rows}  # fmt: skip
+    for label, row in merged.items():
+        print(f"{label}: success {row['success rate']:.2f} in {row['seconds']:.0f} s")
+    return merged
+
+
+def table(rows: dict[str, dict], paper: dict[str, tuple] | None = None) -> list[str]:
     lines = ["| controller | steps ↓ | success rate ↑ | avg. dist. ↓ | contact score ↑ | FS ↓ | seconds |",
              "|---|---|---|---|---|---|---|"]  # fmt: skip
     for name, row in rows.items():
         steps = "–" if np.isnan(row["steps"]) else f"{row['steps']:.1f}"  # no pair reached its goal
         lines.append(f"| {name} | {steps} | {row['success rate']:.2f} | {row['avg. dist.']:.2f} | "
-                     f"{row['contact score']:.3f} | {row['FS']:.3f} | {seconds[name]:.0f} |")  # fmt: skip
+                     f"{row['contact score']:.3f} | {row['FS']:.3f} | {row['seconds']:.0f} |")  # fmt: skip
     for name, (steps, success, distance, score) in (paper or {}).items():
         lines.append(f"| {name} | {steps} | {success} | {distance} | {score} | | |")
     return lines
 
 
 def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False, bf16: bool = False,
-         precision: str = "auto", output: str | None = None) -> int:  # fmt: skip
+         precision: str = "auto", output: str | None = None, ray_address: str | None = None,
+         policies: list[Path] | None = None) -> int:  # fmt: skip
     """`precision`: the prior's networks for the main table; `output`: the results' file stem (default
-    gamma_control[_quick])."""
+    gamma_control[_quick]); `ray_address`: fan the pair groups out over Ray ("local" or a cluster's address);
+    `policies`: GammaReach policy files to evaluate in place of the shipped ones (e.g. one trained on RLlib)."""
     if quick:
         pairs, clones = 20, 8
-    began = time.perf_counter()
-    core = GammaReachCore(GammaReachConfig(precision=precision))
+    began, requested = time.perf_counter(), precision
+    core = cached_core(precision, False)
     start = fixed_pairs(core, pairs, seed)
-    runs: dict[str, Callable[[], dict]] = {"random z": lambda: run_clones(core, start, RandomLatent(seed), clones)}
+    precision = core.generator.precision  # "auto" resolved here: every task, on whatever CPU, runs the same networks
+    runs: dict[str, GammaRow] = {"random z": GammaRow("random", clones=clones, precision=precision)}
     if G_CVAE_WEIGHTS.exists():
-        goal_core = GammaReachCore(GammaReachConfig(), goal_cvae_generator(base=core.generator))
-        runs["g-CVAE"] = lambda: run_clones(goal_core, start, RandomLatent(seed), clones)
-    policies = {policy_label(path): path for path in sorted(WEIGHTS_DIR.glob("ppo_gammareach_*.zip"))}
+        runs["g-CVAE"] = GammaRow("g-cvae", clones=clones, precision=precision)
+    policies = ({policy_label(path): path for path in sorted(WEIGHTS_DIR.glob("ppo_gammareach_*.zip"))} if policies is None
+                else {f"{policy_label(path)} ({path})": path for path in policies})  # fmt: skip
     for label, path in policies.items():
-        runs[label] = lambda path=path: run_clones(core, start, PolicyLatent(path, seed=seed), clones)
+        runs[label] = GammaRow("policy", path, clones=clones, precision=precision)
     searchers = {label: path for label, path in policies.items() if label in ("policy(10)", "policy(1)")}
-    costs = (("", SearchCost()), (", distance cost", SearchCost.distance_only()))
+    costs = (("", "release"), (", distance cost", "distance"))
     for (label, path), keep, (cost_name, cost) in itertools.product(searchers.items(), (1, 4), costs):
-        runs[f"{label} & top{keep}{cost_name}"] = lambda path=path, keep=keep, cost=cost: run_search(
-            core, start, PolicyLatent(path, seed=seed), SearchSettings(keep=keep, cost=cost))  # fmt: skip
+        runs[f"{label} & top{keep}{cost_name}"] = GammaRow("policy", path, keep=keep, cost=cost, precision=precision)
     searcher = searchers.get("policy(10)")
-    runs["random z & top4"] = lambda: run_search(core, start, RandomLatent(seed), SearchSettings(keep=4))
-    rows, seconds = timed_rows(runs)
+    runs["random z & top4"] = GammaRow("random", keep=4, precision=precision)
+    rows = run_rows(runs, pairs, seed, ray_address)
     stem = output or "gamma_control" + ("_quick" if quick else "")
     lines = [
         f"# GAMMA goal reaching ({'quick: ' if quick else ''}{pairs} body-goal pairs × {clones} clones, up to 60 primitives)",
@@ -200,8 +266,10 @@ def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False,
         "Steps: primitives to the first arrival (successful pairs); avg. dist.: pelvis-goal ground distance (m) of all "
         "clones when the pair ends (search rows: of the kept nodes); contact score: Eq. 11 per primitive; FS: WANDR's, "
         "40 fps, 0.2 m/s. Search rows: 16 roots, 4 children per node, top-K kept, the release's node cost (contact + "
-        "0.1 × orientation + 0.1 × distance) or distance alone (`SearchCost.distance_only`). Policies sample their latents.",
-        "", *table(rows, seconds, PAPER_ROWS),
+        "0.1 × orientation + 0.1 × distance) or distance alone (`SearchCost.distance_only`). Policies sample their latents. "
+        f"Pairs run in groups of {PAIRS_PER_TASK} (`benchmarks.fanout`), "
+        + ("in this process" if ray_address is None else f"as Ray tasks ({ray_address})") + "; seconds: a row's groups, summed.",
+        "", *table(rows, PAPER_ROWS),
     ]  # fmt: skip
     lines += ["", f"The prior's networks ran in {core.generator.precision} (`precision=\"auto\"`: bf16 only on a CPU with "
               "native bf16, `motion_envs.precision`)."]  # fmt: skip
@@ -209,14 +277,16 @@ def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False,
         check_pairs, check_clones = BF16_CHECK
         subset = start.index(torch.arange(min(check_pairs, pairs)))
         cores = {name: GammaReachCore(GammaReachConfig(precision=name)) for name in ("float32", "bfloat16")}
-        checks, check_seconds = timed_rows({
-            f"policy(10), {name} prior": lambda name=name: run_clones(cores[name], subset, PolicyLatent(searcher, seed=seed), check_clones)
-            for name in cores
-        })  # fmt: skip
+        checks = {}
+        for name, check_core in cores.items():
+            tick = time.perf_counter()
+            part = run_clones(check_core, subset, PolicyLatent(searcher, seed=seed), check_clones)
+            checks[f"policy(10), {name} prior"] = summarise([{**part, "seconds": time.perf_counter() - tick}])
         lines += ["", f"bf16 check: the first {subset.num_bodies} pairs × {check_clones} clones, the prior's networks in fp32 "
-                  "and in bf16 (`GammaReachConfig.precision`), same policy and seed.", "", *table(checks, check_seconds)]  # fmt: skip
+                  "and in bf16 (`GammaReachConfig.precision`), same policy and seed.", "", *table(checks)]  # fmt: skip
     lines += ["", machine_line(), f"Command: `motion-envs bench gamma{' --quick' if quick else ''}{' --bf16' if bf16 else ''}"
-              f"{'' if precision == 'auto' else ' --precision ' + precision}{' --output ' + output if output else ''}`; "
+              f"{'' if requested == 'auto' else ' --precision ' + requested}{' --output ' + output if output else ''}"
+              f"{'' if ray_address is None else ' --ray ' + ray_address}`; "
               f"{time.perf_counter() - began:.0f} s in all.", "", f"![paths]({stem}.png)", ""]  # fmt: skip
     text = "\n".join(lines)
     print(text)

@@ -63,9 +63,10 @@ SR by height, angle and distance) and the prior's decode throughput into
 
 from __future__ import annotations
 
+import functools
 import math
 import time
-from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -73,9 +74,11 @@ import torch
 
 from baselines.latent_optimisation import LatentSequence, optimise_latents
 from baselines.wandr_sampler import Controller, WandrSampler, roll_out
+from benchmarks.fanout import run_tasks
 from benchmarks.machine import machine_line
 from benchmarks.sections import replace_rows, replace_section
 from motion_envs.atomic import atomic_write
+from motion_envs.counter_random import BodyNoise
 from motion_envs.data.dataset import MotionDataset
 from motion_envs.envs.wandr_reach import WandrReachConfig, WandrReachCore, WandrReachState
 from motion_envs.priors.train_wandr import WandrClips, load_wandr
@@ -117,48 +120,114 @@ def grid_values() -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     return angles, torch.linspace(*HEIGHT_RANGE, HEIGHTS), torch.linspace(*DISTANCE_RANGE, DISTANCES)
 
 
+def grid_cells(poses: int, samples: int) -> torch.Tensor:
+    """(B, 5) every (pose, angle, height, distance, sample) index of the grid, in rollout order."""
+    return torch.cartesian_prod(torch.arange(poses), torch.arange(ANGLES), torch.arange(HEIGHTS), torch.arange(DISTANCES),
+                                torch.arange(samples))  # fmt: skip
+
+
+def cell_axes(cells: torch.Tensor) -> dict[str, torch.Tensor]:
+    """Each rollout's angle, height and distance index."""
+    return {"angle": cells[:, 1], "height": cells[:, 2], "distance": cells[:, 3]}
+
+
 def grid_start(core: WandrReachCore, poses: int, samples: int, paced: bool = False) -> tuple[WandrReachState, dict[str, torch.Tensor]]:
     """Every (pose, angle, height, distance, sample) as one batch; returns the state and each body's grid cell.
     paced: each goal is due at a walking pace (`PACED_START_S`, `PACED_SPEED`), not at the episode's end."""
     angles, heights, distances = grid_values()
     pose_rows = torch.linspace(0, core.num_starts - 1, poses).round().long()
-    cells = torch.cartesian_prod(torch.arange(poses), torch.arange(ANGLES), torch.arange(HEIGHTS), torch.arange(DISTANCES),
-                                 torch.arange(samples))  # fmt: skip
+    cells = grid_cells(poses, samples)
     start_index, facing = pose_rows[cells[:, 0]], torch.zeros(len(cells))
     goals = core.cylinder_goals(start_index, facing, angles[cells[:, 1]], heights[cells[:, 2]], distances[cells[:, 3]])
     due = (PACED_START_S + distances[cells[:, 3]] / PACED_SPEED) * FPS
     goal_time = due.round().long().clamp(max=core.config.max_frames) if paced else None
     state = core.initial_state(start_index, facing, goals[:, None], goal_time=goal_time)
-    return state, {"angle": cells[:, 1], "height": cells[:, 2], "distance": cells[:, 3]}
+    return state, cell_axes(cells)
 
 
-def evaluate(core: WandrReachCore, start: WandrReachState, controller: Controller) -> dict:
-    """SR, FS and DTG of one controller over the batch, with wall time."""
+SHARD = 250
+"""Rollouts per task: every row runs as shards of this many bodies, one after another in this process or as Ray
+tasks (`benchmarks.fanout`), so its numbers do not depend on where it ran (the full grid: 15 tasks a row)."""
+CONTROLLERS = ("sampler", "policy", "policy-mean", "vae-opt", "wandr-opt")
+
+
+@dataclass(frozen=True)
+class GridRow:
+    """A table row as a task rebuilds it: the prior's weights, the controller, the goals' deadlines and the grid.
+
+    controller: "sampler" (`WandrSampler(sigma)`), "policy" / "policy-mean" (`PolicyLatent(policy)`, sampled or
+    mean latents), "vae-opt" / "wandr-opt" (latent optimisation with a zero / the prior's own intention)."""
+
+    prior: Path
+    controller: str = "sampler"
+    sigma: float = 1.0
+    policy: Path | None = None
+    paced: bool = False
+    ground_feet: bool = True
+    poses: int = 6
+    samples: int = 5
+
+    def __post_init__(self) -> None:
+        if self.controller not in CONTROLLERS:
+            raise ValueError(f"controller must be one of {CONTROLLERS}, got {self.controller!r}")
+
+    def shards(self) -> list[tuple[int, int]]:
+        """[first, last) rollout ranges of `SHARD` rollouts."""
+        count = self.poses * ANGLES * HEIGHTS * DISTANCES * self.samples
+        return [(first, min(first + SHARD, count)) for first in range(0, count, SHARD)]
+
+
+@functools.lru_cache(maxsize=8)
+def cached_prior(path: Path) -> torch.nn.Module:
+    """A prior loaded once per process (a task's network is read-only; latent optimisation freezes and restores it)."""
+    return load_wandr(path)
+
+
+def run_shard(row: GridRow, first: int, last: int, seed: int) -> dict:
+    """Rollouts [first, last) of the row's grid: per-rollout reached, skated frames, frames and closest distance
+    (numpy), and the task's seconds. A pure function of its arguments (per-body noise: `BodyNoise`)."""
+    from agents.controllers import PolicyLatent
+
+    torch.manual_seed(seed)
+    core = WandrReachCore(WandrReachConfig(ground_feet=row.ground_feet), prior=cached_prior(row.prior))
+    bodies = torch.arange(first, last)
+    start = grid_start(core, row.poses, row.samples, row.paced)[0].index(bodies)
     began = time.perf_counter()
-    final = roll_out(core, start, controller, progress=True)
-    seconds = time.perf_counter() - began
-    return {"SR": 100 * float(final.reached.float().mean()), "FS": 100 * float(final.skated.sum() / final.frame.sum()),
-            "DTG": 100 * float(final.closest.mean()), "reached": final.reached.cpu(), "seconds": seconds,
-            "frames": int(final.frame.sum())}  # fmt: skip
+    if row.controller == "sampler":
+        controller: Controller = WandrSampler(row.sigma, seed=seed, bodies=bodies)
+    elif row.controller in ("policy", "policy-mean"):
+        controller = PolicyLatent(row.policy, deterministic=row.controller == "policy-mean", seed=seed, bodies=bodies)
+    else:
+        intentions = () if row.controller == "vae-opt" else None
+        core.stepper = WandrStepper(core.prior, core.body, core.config.ground_feet, intentions)
+        frames, noise = core.config.max_frames, BodyNoise(seed, bodies)
+        initial = torch.stack([noise(len(bodies), core.prior.config.latent) for _ in range(frames)], dim=1)
+        controller = LatentSequence(optimise_latents(core.stepper, start, frames, initial))
+    final = roll_out(core, start, controller)
+    return {"reached": final.reached.numpy(), "skated": final.skated.numpy(), "frames": final.frame.numpy(),
+            "closest": final.closest.numpy(), "seconds": time.perf_counter() - began}  # fmt: skip
+
+
+def merge_shards(parts: list[dict]) -> dict:
+    """One row's SR, FS and DTG (as `evaluate`) from its shards in order; seconds: their sum."""
+    reached = torch.as_tensor(np.concatenate([part["reached"] for part in parts]))
+    skated = float(np.concatenate([part["skated"] for part in parts]).sum())
+    frames = int(np.concatenate([part["frames"] for part in parts]).sum())
+    closest = np.concatenate([part["closest"] for part in parts])
+    return {"SR": 100 * float(reached.float().mean()), "FS": 100 * skated / frames, "DTG": 100 * float(closest.mean()),
+            "reached": reached, "seconds": sum(part["seconds"] for part in parts), "frames": frames}  # fmt: skip
+
+
+def run_rows(rows: dict[str, GridRow], seed: int, ray_address: str | None = None) -> dict[str, dict]:
+    """Every row's figures ({label: merge_shards(...)}), its shards run in this process or over Ray."""
+    tasks = [(label, (row, first, last, seed)) for label, row in rows.items() for first, last in row.shards()]
+    results = run_tasks(run_shard, [arguments for _, arguments in tasks], ray_address, "wandr grid shards")
+    return {label: merge_shards([result for (task_label, _), result in zip(tasks, results) if task_label == label])
+            for label in rows}  # fmt: skip
 
 
 OPTIMISATION_POSES = 2
-
-
-def optimisation_row(prior_path: Path, intentions: tuple[str, ...] | None, seed: int) -> dict:
-    """Latent optimisation from z ~ N(0, I) on `OPTIMISATION_POSES` poses × 1 sample, scored by replaying.
-
-    intentions: what the prior is shown (() for "VAE + opt", None for its own, "WANDR + opt")."""
-    core = WandrReachCore(WandrReachConfig(), prior=load_wandr(prior_path))
-    core.stepper = WandrStepper(core.prior, core.body, core.config.ground_feet, intentions)
-    start, _ = grid_start(core, OPTIMISATION_POSES, 1)
-    frames = core.config.max_frames
-    initial = torch.randn(start.num_bodies, frames, core.prior.config.latent, generator=torch.Generator().manual_seed(seed))
-    began = time.perf_counter()
-    latents = optimise_latents(core.stepper, start, frames, initial, progress=True)
-    seconds = time.perf_counter() - began
-    row = evaluate(core, start, LatentSequence(latents))
-    return {**row, "seconds": row["seconds"] + seconds}
+"""Latent optimisation rows: 2 start poses × 1 sample (250 rollouts; it backpropagates through 240 frames)."""
 
 
 def motion_30fps(subsets: tuple[str, ...] = SHIPPED_SUBSETS) -> MotionDataset | None:
@@ -241,70 +310,76 @@ def table_row(label: str, row: dict) -> str:
     return f"| {label} | {row['SR']:.1f} | {row['FS']:.1f} | {row['DTG']:.1f} | {row['seconds']:.0f} |"
 
 
-def main(quick: bool = False, seed: int = 0, weights_dir: Path | None = None, policies: list[Path] | None = None,
-         data_fs: bool = True, optimisation: bool = True, variants_dir: Path = VARIANTS_DIR, only: str | None = None) -> int:  # fmt: skip
-    """Run every row, print the table, write the result files.
-
-    only: rerun just the grid rows whose label contains this text and rewrite those rows of the existing
-    table (e.g. a new policy, when the ablation weights of the last full run are not at hand)."""
-    from agents.controllers import PolicyLatent
-
+def grid_rows(quick: bool = False, weights_dir: Path | None = None, policies: list[Path] | None = None,
+              optimisation: bool = True, variants_dir: Path = VARIANTS_DIR, only: str | None = None) -> dict[str, GridRow]:  # fmt: skip
+    """The benchmark's rows ({label: GridRow}) for the weights at hand (see `main`)."""
     poses, samples = (2, 1) if quick else (6, 5)
     weights_dir = weights_dir or WEIGHTS_DIR
-    rows: dict[str, dict] = {}
-    runs: dict[str, tuple[Path, Callable[[], Controller], bool]] = {}  # label -> prior, controller, paced
-    if (weights_dir / "wandr.pt").exists():
-        runs["WANDR sampler"] = (weights_dir / "wandr.pt", lambda: WandrSampler(seed=seed), False)
-        runs[PACED_LABEL] = (weights_dir / "wandr.pt", lambda: WandrSampler(seed=seed), True)
+    shipped = weights_dir / "wandr.pt"
+    grid = {"poses": poses, "samples": samples}
+    runs: dict[str, GridRow] = {}
+    if shipped.exists():
+        runs["WANDR sampler"] = GridRow(shipped, **grid)
+        runs[PACED_LABEL] = GridRow(shipped, paced=True, **grid)
         for sigma, name in COLD_SIGMAS.items():
-            runs[f"{PACED_LABEL}, {name}"] = (weights_dir / "wandr.pt", lambda s=sigma: WandrSampler(s, seed=seed), True)
+            runs[f"{PACED_LABEL}, {name}"] = GridRow(shipped, sigma=sigma, paced=True, **grid)
     for name, label in VARIANTS.items():
         if (variants_dir / name).exists():
-            runs[label] = (variants_dir / name, lambda: WandrSampler(seed=seed), False)
-            runs[f"{label}, paced"] = (variants_dir / name, lambda: WandrSampler(seed=seed), True)
+            runs[label] = GridRow(variants_dir / name, **grid)
+            runs[f"{label}, paced"] = GridRow(variants_dir / name, paced=True, **grid)
     for policy in policies if policies is not None else sorted(weights_dir.glob("ppo_wandrreach*.zip")):
-        runs[f"PPO ({policy.stem})"] = (weights_dir / "wandr.pt", lambda p=policy: PolicyLatent(p, seed=seed), False)
-        runs[f"PPO ({policy.stem}), mean latent"] = (weights_dir / "wandr.pt",
-                                                     lambda p=policy: PolicyLatent(p, deterministic=True, seed=seed), False)  # fmt: skip
+        runs[f"PPO ({policy.stem})"] = GridRow(shipped, "policy", policy=policy, **grid)
+        runs[f"PPO ({policy.stem}), mean latent"] = GridRow(shipped, "policy-mean", policy=policy, **grid)
     if only is not None:
         runs = {label: run for label, run in runs.items() if only in label}
     if not runs:
         raise FileNotFoundError(f"no WANDR weights in {weights_dir}" + (f" for rows matching {only!r}" if only else ""))
-    by_cell: dict[str, dict[str, np.ndarray]] = {}
-    for label, (prior_path, make_controller, paced) in runs.items():
-        torch.manual_seed(seed)
-        core = WandrReachCore(WandrReachConfig(), prior=load_wandr(prior_path))
-        start, cells = grid_start(core, poses, samples, paced)
-        rows[label] = evaluate(core, start, make_controller())
-        print(f"{label}: SR {rows[label]['SR']:.1f}%  FS {rows[label]['FS']:.1f}%  DTG {rows[label]['DTG']:.1f} cm  "
-              f"({rows[label]['seconds']:.0f} s)")  # fmt: skip
-        if not by_cell or label == PACED_LABEL:
-            by_cell[label] = success_by_cell(rows[label]["reached"], cells)
+    if only is None and shipped.exists():
+        runs["WANDR sampler, prior alone (no ground_feet)"] = GridRow(shipped, ground_feet=False, **grid)
+        if optimisation:
+            few = {"poses": OPTIMISATION_POSES, "samples": 1}
+            runs[f"VAE + opt (zero intention; {OPTIMISATION_POSES} poses × 1 sample)"] = GridRow(shipped, "vae-opt", **few)
+            runs[f"WANDR + opt ({OPTIMISATION_POSES} poses × 1 sample)"] = GridRow(shipped, "wandr-opt", **few)
+    return runs
+
+
+def main(quick: bool = False, seed: int = 0, weights_dir: Path | None = None, policies: list[Path] | None = None,
+         data_fs: bool = True, optimisation: bool = True, variants_dir: Path = VARIANTS_DIR, only: str | None = None,
+         ray_address: str | None = None) -> int:  # fmt: skip
+    """Run every row, print the table, write the result files.
+
+    only: rerun just the grid rows whose label contains this text and rewrite those rows of the existing
+    table (e.g. a new policy, when the ablation weights of the last full run are not at hand).
+    ray_address: fan the rows' shards out over Ray (`benchmarks.fanout`: "local" or a cluster's address)."""
+    poses, samples = (2, 1) if quick else (6, 5)
+    runs = grid_rows(quick, weights_dir, policies, optimisation, variants_dir, only)
+    began = time.perf_counter()
+    rows = run_rows(runs, seed, ray_address)
+    wall = time.perf_counter() - began
+    for label, row in rows.items():
+        print(f"{label}: SR {row['SR']:.1f}%  FS {row['FS']:.1f}%  DTG {row['DTG']:.1f} cm  ({row['seconds']:.0f} s)")
+    cells = cell_axes(grid_cells(poses, samples))
+    grid_labels = [label for label in runs if runs[label].poses == poses]
+    by_cell = {label: success_by_cell(rows[label]["reached"], cells)
+               for label in grid_labels if label == grid_labels[0] or label == PACED_LABEL}  # fmt: skip
+    where = ("in this process" if ray_address is None else
+             f"as {sum(len(row.shards()) for row in runs.values())} Ray tasks of ≤ {SHARD} rollouts ({ray_address})")  # fmt: skip
     name = "wandr_grid_quick" if quick else "wandr_grid"
     if only is not None:
         replace_rows(RESULTS / f"{name}.md", {label: table_row(label, row) for label, row in rows.items()}, "| data",
                      f"Rows containing '{only}' rerun by `motion-envs bench wandr --only '{only}'`: {machine_line()}")  # fmt: skip
         return 0
     main_label = next(iter(by_cell))
-    shipped = weights_dir / "wandr.pt"
-    if shipped.exists():
-        core = WandrReachCore(WandrReachConfig(ground_feet=False), prior=load_wandr(shipped))
-        rows["WANDR sampler, prior alone (no ground_feet)"] = evaluate(core, grid_start(core, poses, samples)[0],
-                                                                       WandrSampler(seed=seed))  # fmt: skip
-    if shipped.exists() and optimisation:
-        for label, intentions in ((f"VAE + opt (zero intention; {OPTIMISATION_POSES} poses × 1 sample)", ()),
-                                  (f"WANDR + opt ({OPTIMISATION_POSES} poses × 1 sample)", None)):  # fmt: skip
-            rows[label] = optimisation_row(shipped, intentions, seed)
-            print(f"{label}: SR {rows[label]['SR']:.1f}%  FS {rows[label]['FS']:.1f}%  DTG {rows[label]['DTG']:.1f} cm")
     data = data_skating() if data_fs else None
-    throughput = decode_throughput(WandrReachCore(WandrReachConfig(), prior=load_wandr(runs[next(iter(runs))][0])))
+    throughput = decode_throughput(WandrReachCore(WandrReachConfig(), prior=load_wandr(runs[main_label].prior)))
 
     count = len(rows[main_label]["reached"])
     lines = [f"# WANDR goal reaching{' (quick)' if quick else ''}", "",
              f"{count} rollouts: {ANGLES} angles × {HEIGHTS} heights ({HEIGHT_RANGE[0]}-{HEIGHT_RANGE[1]} m) × "
              f"{DISTANCES} distances ({DISTANCE_RANGE[0]}-{DISTANCE_RANGE[1]} m) × {poses} start poses × {samples} samples, "
-             f"≤ 240 frames (8 s) each, one batch per row. `motion-envs bench wandr{' --quick' if quick else ''}`.",
-             machine_line(), "", "| row | SR (%) | FS (%) | DTG (cm) | wall time (s) |", "|---|---|---|---|---|"]  # fmt: skip
+             f"≤ 240 frames (8 s) each, in batches of {SHARD} (`benchmarks.fanout`), run {where}: {wall:.0f} s in all. "
+             f"`motion-envs bench wandr{' --quick' if quick else ''}`. Time per row: its batches' seconds, summed.",
+             machine_line(), "", "| row | SR (%) | FS (%) | DTG (cm) | time (s) |", "|---|---|---|---|---|"]  # fmt: skip
     for label, row in rows.items():
         lines.append(table_row(label, row))
     if data is not None:
@@ -329,6 +404,6 @@ def main(quick: bool = False, seed: int = 0, weights_dir: Path | None = None, po
             "## WANDR prior decode", "", machine_line(), "",
             "| batch | prior step (body-frames/s) | env core step (body-frames/s) | target |", "|---|---|---|---|",
             f"| 1,024 | {throughput['prior']:,.0f} | {throughput['env']:,.0f} | ≥ 20,000 |", "",
-            f"Whole grid ({count} rollouts of ≤ 240 frames), sampler row: {rows[main_label]['seconds']:.0f} s "
+            f"Whole grid ({count} rollouts of ≤ 240 frames, batches of {SHARD}), sampler row: {rows[main_label]['seconds']:.0f} s "
             f"({rows[main_label]['frames'] / rows[main_label]['seconds']:,.0f} body-frames/s).", ""]))  # fmt: skip
     return 0

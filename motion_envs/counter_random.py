@@ -39,3 +39,24 @@ def counter_normal(keys: torch.Tensor, counters: torch.Tensor, size: int) -> tor
     base = _splitmix(_splitmix(keys)[:, None] ^ (counters[:, None] * (2 * size) + 2 * index))
     first, second = _uniform(_splitmix(base)), _uniform(_splitmix(base + 1))
     return (torch.sqrt(-2.0 * torch.log(first)) * torch.cos(2.0 * math.pi * second)).float()
+
+
+class BodyNoise:
+    """Standard normal draws for a batch of bodies that do not depend on which other bodies share the batch.
+
+    Body b's draws at call t are `counter_normal(seed · 2³² + b, t)`; `bodies` (N,) int64 gives the bodies'
+    global indices (default 0..N-1 on each call), so a batch split into shards (e.g. a benchmark fanned out
+    over Ray tasks) draws exactly what the whole batch would."""
+
+    def __init__(self, seed: int = 0, bodies: torch.Tensor | None = None) -> None:
+        self.seed, self.bodies, self.calls = int(seed), bodies, 0
+
+    def __call__(self, num_bodies: int, size: int) -> torch.Tensor:
+        """(num_bodies, size) float32 draws; the next call gives the next ones."""
+        bodies = torch.arange(num_bodies) if self.bodies is None else self.bodies
+        if len(bodies) != num_bodies:
+            raise ValueError(f"this noise is for {len(bodies)} bodies, asked for {num_bodies}")
+        keys = (self.seed << 32) + bodies.long()
+        draws = counter_normal(keys, torch.full_like(keys, self.calls), size)
+        self.calls += 1
+        return draws

@@ -69,6 +69,23 @@ class DQNTrainConfig:
     ship: bool = False
     """Write the policy into the package (priors/weights/ + manifest) instead of `run_dir` (`weights_destination`)."""
     command: str = ""
+    engine: str = "sb3"
+    """"sb3": `PrioritizedDoubleDQN` in this process; "rllib": RLlib's DQN on Ray (`agents.train_rllib.train_rllib_dqn`),
+    the same Q-network, double-Q and prioritised replay, the same files."""
+    env_runners: int = 0
+    """rllib: Ray env-runner actors sharing the `num_envs` bodies; 0: the driver process samples."""
+    address: str | None = None
+    """rllib: a Ray cluster to join; None: a local Ray."""
+
+    def __post_init__(self) -> None:
+        if self.engine not in ("sb3", "rllib"):
+            raise ValueError(f"engine must be 'sb3' or 'rllib', got {self.engine!r}")
+        if self.env_runners < 0 or (self.env_runners and self.num_envs % self.env_runners):
+            raise ValueError(f"env_runners must be >= 0 and split num_envs ({self.num_envs}) evenly, got {self.env_runners}")
+
+    def checkpoint_path(self) -> Path:
+        """What a resumed run continues from: SB3's model.zip, or RLlib's checkpoint folder."""
+        return self.run_dir / ("rllib" if self.engine == "rllib" else "model.zip")
 
     def weights_path(self) -> Path:
         options = {name: True for name in ("known_goal", "goal_memory") if getattr(self, name)}
@@ -92,6 +109,10 @@ def make_model(config: DQNTrainConfig, venv: VecMonitor) -> PrioritizedDoubleDQN
 
 def train_dqn(config: DQNTrainConfig) -> dict:
     """Train (or resume) a ClopsNav policy; returns the manifest entry it writes."""
+    if config.engine == "rllib":
+        from agents.train_rllib import train_rllib_dqn
+
+        return train_rllib_dqn(config)
     config.run_dir.mkdir(parents=True, exist_ok=True)
     torch.manual_seed(config.seed)
     venv = VecMonitor(NativeVecEnv.make(config.env_id, num_envs=config.num_envs, family=config.family,

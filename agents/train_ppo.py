@@ -41,6 +41,9 @@ from motion_envs.priors.training import announce_replacement, record_in_manifest
 
 DEFAULT_REWARDS = {"motion_envs/GammaReach-v0": "paper", "motion_envs/WandrReach-v0": "default"}
 """Each latent-action env's default reward spec (`train ppo` without `--reward`)."""
+ENGINES = ("sb3", "rllib")
+RLLIB_ONLY_ENVS = ("motion_envs/ClopsNav-v0",)
+"""Envs PPO trains only on RLlib (a categorical policy; SB3's path is PPOKL's Gaussian one): no reward spec."""
 
 
 @dataclass
@@ -87,12 +90,30 @@ class PPOTrainConfig:
     ship: bool = False
     """Write the policy into the package (priors/weights/ + manifest) instead of `run_dir` (`weights_destination`)."""
     command: str = ""
+    engine: str = "sb3"
+    """"sb3": Stable-Baselines3 in this process (`train_ppo`); "rllib": RLlib's PPO on Ray (`agents.train_rllib`),
+    the same networks, loss and files."""
+    env_runners: int = 0
+    """rllib: Ray env-runner actors, each stepping num_envs / env_runners bodies in one native vector env; 0: the
+    driver process samples."""
+    address: str | None = None
+    """rllib: a Ray cluster to join ("auto", "ray://host:10001", "host:6379"); None: a local Ray on this machine."""
 
     def __post_init__(self) -> None:
-        if self.reward is None:
-            if self.env_id not in DEFAULT_REWARDS:
-                raise ValueError(f"PPO trains {sorted(DEFAULT_REWARDS)}, not {self.env_id!r}")
+        if self.engine not in ENGINES:
+            raise ValueError(f"engine must be one of {ENGINES}, got {self.engine!r}")
+        if self.reward is None and self.env_id in DEFAULT_REWARDS:
             self.reward = DEFAULT_REWARDS[self.env_id]
+        elif self.reward is None and not (self.engine == "rllib" and self.env_id in RLLIB_ONLY_ENVS):
+            raise ValueError(f"PPO trains {sorted(DEFAULT_REWARDS)}"
+                             f"{' (and, with engine rllib, ' + ', '.join(RLLIB_ONLY_ENVS) + ')' if self.engine == 'sb3' else ''}"
+                             f", not {self.env_id!r}")  # fmt: skip
+        if self.engine == "rllib" and self.anchor > 0:
+            raise ValueError("anchor > 0 is SB3-only (engine sb3); RLlib's PPO here has the paper's loss")
+        if self.env_runners < 0 or self.env_runners > self.num_envs:
+            raise ValueError(f"env_runners must be in 0..num_envs ({self.num_envs}), got {self.env_runners}")
+        if self.env_runners and self.num_envs % self.env_runners:
+            raise ValueError(f"num_envs ({self.num_envs}) must split evenly over env_runners ({self.env_runners})")
         if self.init not in ("data", "scratch") and not Path(self.init).is_file():
             raise ValueError(f"init must be 'data', 'scratch' or a policy file, got {self.init!r} (no such file)")
         if self.keep not in ("best", "last"):
@@ -100,8 +121,14 @@ class PPOTrainConfig:
         if self.anchor > 0 and self.init != "data":
             raise ValueError("anchor > 0 holds the policy near its cloned start: it needs init='data'")
 
+    def checkpoint_path(self) -> Path:
+        """What a resumed run continues from: SB3's model.zip, or RLlib's checkpoint folder."""
+        return self.run_dir / ("rllib" if self.engine == "rllib" else "model.zip")
+
     def weights_path(self) -> Path:
         name = self.env_id.split("/")[-1].split("-")[0].lower()
+        if self.reward is None:
+            return weights_destination(f"ppo_{name}_{self.engine}.zip", self.run_dir, self.weights, self.ship)
         reward = self.reward.replace(":", "-").replace("=", "").replace(",", "-")  # "paper:goal=5" -> "paper-goal5"
         return weights_destination(f"ppo_{name}_alpha{self.alpha:g}_{reward}.zip", self.run_dir, self.weights, self.ship)
 
@@ -146,6 +173,10 @@ class CurveCallback(BaseCallback):
 
 def train_ppo(config: PPOTrainConfig, clone_from: GoalWindows | None = None) -> dict:
     """Train (or resume) a policy; a new one with `init="data"` first clones `clone_from`'s latents."""
+    if config.engine == "rllib":
+        from agents.train_rllib import train_rllib
+
+        return train_rllib(config, clone_from)
     if config.init == "data" and clone_from is None and not (config.run_dir / "model.zip").exists():
         raise ValueError("init='data' needs goal windows from the data (clone_from); pass init='scratch' to skip")
     config.run_dir.mkdir(parents=True, exist_ok=True)
@@ -171,21 +202,9 @@ def train_ppo(config: PPOTrainConfig, clone_from: GoalWindows | None = None) -> 
                            batch_size=config.batch_size, n_epochs=config.n_epochs)  # this run's settings; fmt: skip
         model.num_timesteps = 0  # this run's steps, from the loaded policy
     else:
-        width = config.net_width
-        model = PPOKL("MlpPolicy", venv, kl_prior_coef=config.alpha, anchor_coef=config.anchor, n_steps=config.n_steps,
-                      batch_size=config.batch_size, n_epochs=config.n_epochs, learning_rate=config.learning_rate,
-                      seed=config.seed, device=config.device,
-                      tensorboard_log=str(config.run_dir / "tensorboard"),
-                      policy_kwargs={"net_arch": {"pi": [width, width], "vf": [width, width]},
-                                     "log_std_init": config.log_std_init})  # fmt: skip
+        model = new_model(config, venv)
         if config.init == "data":
-            generator = model.get_env().get_attr("core")[0].generator
-            latents = posterior_latents(generator.predictor_2f, clone_from)
-            cloning = clone_latents(model.policy, clone_from.observation, latents, epochs=config.clone_epochs, seed=config.seed)
-            print("cloned data latents: " + ", ".join(f"{k} {v:.4f}" for k, v in cloning.items()), file=sys.stderr)
-            if config.anchor > 0:
-                model.policy.set_anchor()
-            atomic_write(cloning_path, lambda file: file.write(json.dumps(cloning).encode()))
+            clone_into(model, clone_from, config)
     callback = CurveCallback(config.run_dir, config.checkpoint_minutes, curve)
     remaining = config.total_timesteps - model.num_timesteps
     if remaining > 0:
@@ -193,6 +212,29 @@ def train_ppo(config: PPOTrainConfig, clone_from: GoalWindows | None = None) -> 
         callback.save()
     extra = {"cloning": json.loads(cloning_path.read_text())} if cloning_path.exists() else {}
     return ship_policy(model, config, curve, "ppo_policy", best=config.keep == "best", **extra)
+
+
+def new_model(config: PPOTrainConfig, venv: Any) -> PPOKL:
+    """A new PPOKL model with the run's settings (two hidden layers of `net_width` for actor and critic)."""
+    width = config.net_width
+    return PPOKL("MlpPolicy", venv, kl_prior_coef=config.alpha, anchor_coef=config.anchor, n_steps=config.n_steps,
+                 batch_size=config.batch_size, n_epochs=config.n_epochs, learning_rate=config.learning_rate,
+                 seed=config.seed, device=config.device, tensorboard_log=str(config.run_dir / "tensorboard"),
+                 policy_kwargs={"net_arch": {"pi": [width, width], "vf": [width, width]},
+                                "log_std_init": config.log_std_init})  # fmt: skip
+
+
+def clone_into(model: PPOKL, clone_from: GoalWindows, config: PPOTrainConfig) -> dict[str, float]:
+    """Fit the model's actor to the 2-frame predictor's posterior latents of `clone_from` (`agents.behaviour_cloning`),
+    set the anchor where the run has one, and record the fit in `run_dir/cloning.json`."""
+    generator = model.get_env().get_attr("core")[0].generator
+    latents = posterior_latents(generator.predictor_2f, clone_from)
+    cloning = clone_latents(model.policy, clone_from.observation, latents, epochs=config.clone_epochs, seed=config.seed)
+    print("cloned data latents: " + ", ".join(f"{k} {v:.4f}" for k, v in cloning.items()), file=sys.stderr)
+    if config.anchor > 0:
+        model.policy.set_anchor()
+    atomic_write(config.run_dir / "cloning.json", lambda file: file.write(json.dumps(cloning).encode()))
+    return cloning
 
 
 def ship_policy(model: Any, config: Any, curve: list[dict], kind: str, best: bool = True,

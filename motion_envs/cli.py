@@ -49,7 +49,7 @@ def _bench_gamma(args: argparse.Namespace) -> int:
     from benchmarks.gamma_control import main as gamma_control
 
     return gamma_control(pairs=args.pairs, clones=args.clones, seed=args.seed, quick=args.quick, bf16=args.bf16,
-                         precision=args.precision, output=args.output)  # fmt: skip
+                         precision=args.precision, output=args.output, ray_address=args.ray, policies=args.policies)  # fmt: skip
 
 
 def _bench_clops(args: argparse.Namespace) -> int:
@@ -61,14 +61,20 @@ def _bench_clops(args: argparse.Namespace) -> int:
     if unknown:
         print(f"unknown families {sorted(unknown)}; choose from {', '.join(FAMILIES)}", file=sys.stderr)
         return 2
-    return clops_matrix(episodes_per_family=args.episodes, families=families, seed=args.seed)
+    return clops_matrix(episodes_per_family=args.episodes, families=families, seed=args.seed, ray_address=args.ray)
+
+
+def _add_ray_arg(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
+                        help="fan the episodes out over Ray tasks (pip install -e '.[ray]'): a local Ray, or the cluster "
+                             "at ADDRESS (auto, host:6379, ray://host:10001); same table as without")  # fmt: skip
 
 
 def _bench_wandr(args: argparse.Namespace) -> int:
     from benchmarks.wandr_grid import main as wandr_grid
 
     return wandr_grid(quick=args.quick, seed=args.seed, data_fs=not args.no_data_fs, optimisation=not args.no_optimisation,
-                      variants_dir=args.variants_dir, only=args.only)  # fmt: skip
+                      variants_dir=args.variants_dir, only=args.only, ray_address=args.ray)  # fmt: skip
 
 
 def _bench_wandr_pace(args: argparse.Namespace) -> int:
@@ -94,6 +100,18 @@ def _bench_speed(args: argparse.Namespace) -> int:
     from benchmarks.throughput import main as throughput
 
     return throughput()
+
+
+def _bench_rllib(args: argparse.Namespace) -> int:
+    from benchmarks.rllib_speed import main as rllib_speed
+
+    return rllib_speed(bodies=args.bodies, curve_from=args.curve_from)
+
+
+def _bench_ray_scaling(args: argparse.Namespace) -> int:
+    from benchmarks.ray_scaling import main as ray_scaling
+
+    return ray_scaling()
 
 
 def _bench_gpu(args: argparse.Namespace) -> int:
@@ -172,13 +190,14 @@ def _train_ppo(args: argparse.Namespace) -> int:
              "total_timesteps": args.timesteps, "run_dir": args.run_dir, "weights": args.weights, "seed": args.seed,
              "init": args.init, "log_std_init": args.log_std_init, "learning_rate": args.learning_rate,
              "n_steps": args.n_steps, "anchor": args.anchor, "ship": args.ship or None, "device": args.device,
-             "env_kwargs": _env_options(args) or None}  # fmt: skip
+             "env_kwargs": _env_options(args) or None, "engine": args.engine, "env_runners": args.env_runners,
+             "address": args.address}  # fmt: skip
     config = PPOTrainConfig(command="motion-envs " + " ".join(sys.argv[1:]),
                             **{name: value for name, value in given.items() if value is not None})  # fmt: skip
     if config.run_dir == PPOTrainConfig.run_dir:
-        config.run_dir = Path(f"runs/{config.weights_path().stem}")
+        config.run_dir = Path(f"runs/{config.weights_path().stem}" + ("_rllib" if config.engine == "rllib" else ""))
     clone_from = None
-    if config.init == "data" and not (config.run_dir / "model.zip").exists():
+    if config.init == "data" and not config.checkpoint_path().exists():
         if "GammaReach" not in config.env_id:
             print(f"--init data clones GAMMA latents; use --init scratch for {config.env_id}", file=sys.stderr)
             return 2
@@ -198,11 +217,12 @@ def _train_dqn(args: argparse.Namespace) -> int:
     given = {"family": args.family, "known_goal": args.known_goal or None, "goal_memory": args.goal_memory or None,
              "num_envs": args.num_envs, "total_timesteps": args.timesteps, "run_dir": args.run_dir, "weights": args.weights, "seed": args.seed,
              "learning_rate": args.learning_rate, "batch_size": args.batch_size, "ship": args.ship or None, "device": args.device,
-             "env_kwargs": _env_options(args) or None}  # fmt: skip
+             "env_kwargs": _env_options(args) or None, "engine": args.engine, "env_runners": args.env_runners,
+             "address": args.address}  # fmt: skip
     config = DQNTrainConfig(command="motion-envs " + " ".join(sys.argv[1:]),
                             **{name: value for name, value in given.items() if value is not None})  # fmt: skip
     if config.run_dir == DQNTrainConfig.run_dir:
-        config.run_dir = Path(f"runs/{config.weights_path().stem}")
+        config.run_dir = Path(f"runs/{config.weights_path().stem}" + ("_rllib" if config.engine == "rllib" else ""))
     entry = train_dqn(config)
     last = entry["curve"][-1] if entry["curve"] else {}
     print(f"{entry['timesteps']} steps; latest success rate {last.get('success_rate', float('nan')):.2f}; "
@@ -487,6 +507,12 @@ def parser() -> argparse.ArgumentParser:
                        help="gamma predictor, wandr, clops: weight of the contact loss (stance feet held still where the "
                             "cleaned data labels contact; default 0 (off) for gamma, 1 for wandr/clops)")  # fmt: skip
     train.add_argument("--device", default=None, help="ppo, dqn: where the policy and the prior run (default cpu; cuda)")
+    train.add_argument("--engine", default=None, choices=("sb3", "rllib"),
+                       help="ppo, dqn: Stable-Baselines3 in this process (default) or RLlib on Ray (pip install -e '.[ray]')")
+    train.add_argument("--env-runners", type=int, default=None,
+                       help="--engine rllib: Ray env-runner actors sharing --num-envs bodies (default 0: the driver samples)")
+    train.add_argument("--address", default=None,
+                       help="--engine rllib: the Ray cluster to join (e.g. auto, host:6379); default a local Ray")
     train.add_argument("--seed", type=int, default=None)
     _add_data_args(train, list(SHIPPED_SUBSETS))
     train.set_defaults(run=_train)
@@ -507,6 +533,9 @@ def parser() -> argparse.ArgumentParser:
     bench_gamma.add_argument("--precision", default="auto", choices=("auto", "float32", "bfloat16"),
                              help="the prior's networks (auto: bf16 where the CPU has it natively)")
     bench_gamma.add_argument("--output", default=None, help="results file stem under benchmarks/results/ (default gamma_control[_quick])")
+    bench_gamma.add_argument("--policies", type=Path, nargs="+", default=None,
+                             help="policy .zip files to evaluate instead of the shipped ones (clone rows only, no search rows)")
+    _add_ray_arg(bench_gamma)
     bench_gamma.set_defaults(run=_bench_gamma)
     bench_wandr = bench.add_parser("wandr", help="WANDR goal reaching (the paper's 3,750-rollout grid) with the shipped weights")
     bench_wandr.add_argument("--quick", action="store_true", help="2 start poses x 1 sample (250 rollouts)")
@@ -517,6 +546,7 @@ def parser() -> argparse.ArgumentParser:
                              help="ablation / data-variant weights to add as rows (not shipped)")
     bench_wandr.add_argument("--only", default=None,
                              help="rerun only the grid rows whose label contains this text (e.g. 'PPO') and rewrite them in the existing table")
+    _add_ray_arg(bench_wandr)
     bench_wandr.set_defaults(run=_bench_wandr)
     bench_pace = bench.add_parser("wandr-pace", help="does WANDR's prior keep the intention's pace on its own training windows?")
     bench_pace.add_argument("--weights", type=Path, nargs="+", default=None, help="WANDR priors (default: the shipped one)")
@@ -525,6 +555,7 @@ def parser() -> argparse.ArgumentParser:
     bench_clops.add_argument("--episodes", type=int, default=100, help="test seeds per family, one episode each (max 100)")
     bench_clops.add_argument("--families", default=None, help="comma-separated layout families (default: all five)")
     bench_clops.add_argument("--seed", type=int, default=0)
+    _add_ray_arg(bench_clops)
     bench_clops.set_defaults(run=_bench_clops)
     video = bench.add_parser("cleanup-video", help="one clip before and after cleanup, side by side (docs/cleanup_<clip>.mp4)")
     video.add_argument("--clip", default="cmu/08_11", help="clip name in the cache (folder/file without suffix)")
@@ -539,6 +570,14 @@ def parser() -> argparse.ArgumentParser:
     bench_floor.set_defaults(run=_bench_floor)
     bench.add_parser("speed", help="GAMMA rollout body-primitives/s by batch, fp32 and bf16 (throughput.md)").set_defaults(
         run=_bench_speed
+    )
+    bench_rllib = bench.add_parser("rllib", help="PPO steps/s on GammaReach: RLlib env runners vs the SB3 path (rllib.md)")
+    bench_rllib.add_argument("--bodies", type=int, default=256, help="bodies per update (default 256)")
+    bench_rllib.add_argument("--curve-from", type=Path, default=None,
+                             help="instead: write the learning curve of this `train ppo --engine rllib` run folder")
+    bench_rllib.set_defaults(run=_bench_rllib)
+    bench.add_parser("ray-scaling", help="the full WANDR grid on 1 vs 2 local Ray workers, tables compared (rllib.md)").set_defaults(
+        run=_bench_ray_scaling
     )
     bench.add_parser("gpu", help="CUDA: CPU and GPU agree on the same latents; GPU throughput (skips without CUDA)").set_defaults(
         run=_bench_gpu

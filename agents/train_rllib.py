@@ -1,4 +1,5 @@
-"""`motion-envs train ppo --engine rllib`: PPO on Ray RLlib (new API stack), with the SB3 path's files.
+"""`motion-envs train ppo|dqn --engine rllib`: PPO (every id) and DQN (ClopsNav) on Ray RLlib's new API stack,
+with the SB3 path's files.
 
 Reads top to bottom: join or start Ray (`--address`, or a local one) -> register the env id so that every env
 runner steps one native vector env of `num_envs / env_runners` bodies (`agents.rllib_envs`) -> RLlib's PPO with
@@ -6,10 +7,12 @@ runner steps one native vector env of `num_envs / env_runners` bodies (`agents.r
 α Ψ(KL) regulariser) and the SB3 path's settings (`PAPER_SETTINGS`, learning rate, batch, epochs; one update per
 `num_envs × n_steps` samples) -> new, cloned from the data's latents (`clone_into`, on the SB3 twin of the
 network, then copied in), or the run's latest checkpoint -> train, every `checkpoint_minutes` saving the
-algorithm atomically to `run_dir/rllib/` with the steps and wall time so far, and appending the success rate
+algorithm atomically to `run_dir/rllib/` with the steps and wall time so far inside, and appending the success rate
 of the episodes that ended since the last save to `run_dir/curve.json` (the best window also as
 `run_dir/best.zip`) -> the policy shipped as the SB3 path ships it (`agents.train_ppo.ship_policy`: a PPOKL
 .zip with `trained_for`, a manifest entry, the curve plot), which `play`, `view` and every benchmark read.
+DQN (`train_rllib_dqn`) runs the same loop with `agents.rllib_dqn.SB3QModule` and ships a
+`PrioritizedDoubleDQN` file.
 
 RLlib by default treats a Box policy's outputs as normalised to [-1, 1] and stretches them to the action box
 (×4 for our latents); here actions are the sampled latents, clipped to the box, as SB3 does. Differences from
@@ -40,8 +43,8 @@ from motion_envs.atomic import atomic_write
 from motion_envs.data.goal_windows import GoalWindows
 
 MODULE_ID = "default_policy"
-PROGRESS = "rllib_progress.json"
-"""Beside the checkpoint folder: env steps and training seconds so far."""
+PROGRESS = "motion_envs_progress.json"
+"""In the checkpoint folder: env steps and training seconds so far."""
 
 
 def start_ray(address: str | None, num_cpus: int | None = None) -> None:
@@ -120,16 +123,16 @@ def load_weights(algorithm: Any, policy_state: dict[str, torch.Tensor]) -> None:
 
 
 def save_checkpoint(algorithm: Any, final: Path, progress: dict[str, float]) -> None:
-    """Save the algorithm to the folder `final` without a half-written state: into a temporary folder, then swapped
-    in; the steps and wall time go beside it (`PROGRESS`)."""
+    """Save the algorithm and `progress` (steps and wall time, `PROGRESS`) to the folder `final` without a
+    half-written state: into a temporary folder, then swapped in."""
     temporary, old = final.with_name(final.name + ".tmp"), final.with_name(final.name + ".old")
     shutil.rmtree(temporary, ignore_errors=True)
     algorithm.save_to_path(str(temporary.resolve()))
+    (temporary / PROGRESS).write_text(json.dumps(progress))
     if final.exists():
         final.rename(old)
     temporary.rename(final)
     shutil.rmtree(old, ignore_errors=True)
-    atomic_write(final.parent / PROGRESS, lambda file: file.write(json.dumps(progress).encode()))
 
 
 def recover_checkpoint(checkpoint: Path) -> None:
@@ -157,7 +160,7 @@ def run_rllib(algorithm: Any, config: Any, model: Any, total_timesteps: int) -> 
     run_dir, checkpoint = config.run_dir, config.checkpoint_path()
     curve_path = run_dir / "curve.json"
     curve: list[dict] = json.loads(curve_path.read_text()) if curve_path.exists() else []
-    progress = json.loads((run_dir / PROGRESS).read_text()) if checkpoint.exists() else {"timesteps": 0, "wall_seconds": 0.0}
+    progress = json.loads((checkpoint / PROGRESS).read_text()) if checkpoint.exists() else {"timesteps": 0, "wall_seconds": 0.0}
     successes = ended = 0.0
     last_save = time.monotonic()
     with tqdm(total=total_timesteps, initial=progress["timesteps"], unit="step", desc=f"rllib {type(algorithm).__name__}") as bar:

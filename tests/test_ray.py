@@ -118,7 +118,7 @@ def test_exported_policy_computes_what_the_rllib_module_computes(local_ray, tmp_
 
 def test_a_stopped_rllib_run_resumes_from_its_checkpoint(local_ray, tmp_path, capsys):
     train_ppo(tiny_config("motion_envs/WandrReach-v0", tmp_path))
-    first = (tmp_path / "run" / "rllib_progress.json").read_text()
+    first = (tmp_path / "run" / "rllib" / "motion_envs_progress.json").read_text()
     entry = train_ppo(tiny_config("motion_envs/WandrReach-v0", tmp_path, total_timesteps=64))
     assert "resuming" in capsys.readouterr().err
     assert '"timesteps": 32' in first and entry["timesteps"] >= 64

@@ -98,6 +98,8 @@ class PPOTrainConfig:
     driver process samples."""
     address: str | None = None
     """rllib: a Ray cluster to join ("auto", "ray://host:10001", "host:6379"); None: a local Ray on this machine."""
+    cpus_per_env_runner: int = 1
+    """rllib: CPUs (and torch threads) each env runner takes."""
 
     def __post_init__(self) -> None:
         if self.engine not in ENGINES:

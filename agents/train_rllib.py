@@ -94,7 +94,8 @@ def algorithm_config(config: PPOTrainConfig) -> Any:
         .environment(env=rllib_env_name(config.env_id, config.bootstrap_truncation), env_config=env_config,
                      normalize_actions=False, clip_actions=True)  # latents as sampled, clipped to the box as SB3
         .env_runners(num_env_runners=config.env_runners, num_envs_per_env_runner=config.num_envs // runners,
-                     gym_env_vectorize_mode="vector_entry_point", rollout_fragment_length=config.n_steps)  # fmt: skip
+                     gym_env_vectorize_mode="vector_entry_point", rollout_fragment_length=config.n_steps,
+                     num_cpus_per_env_runner=config.cpus_per_env_runner)  # fmt: skip
         .learners(num_gpus_per_learner=1 if config.device.startswith("cuda") else 0, learner_class=LatentPriorPPOLearner,
                   learner_config_dict={"kl_prior_coef": config.alpha})  # fmt: skip
         .training(train_batch_size_per_learner=config.num_envs * config.n_steps, minibatch_size=config.batch_size,

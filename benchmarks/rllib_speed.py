@@ -5,7 +5,8 @@ Each engine trains PPO with α = 10 (the paper's reward) from the same 256-unit 
 × 60 primitives per update (the SB3 path's defaults, `agents.train_ppo.PPOTrainConfig`), for one warm-up update
 and `updates` timed ones. Rows: SB3 (`agents.vec_env.NativeVecEnv`, one process), RLlib with the driver
 sampling (0 env runners) and RLlib with 1 env-runner actor. Columns: env steps (primitives) per second of
-sampling, and per second of the whole update (sampling + learning). Timing ratios are within this run.
+sampling, and per second of the whole update (sampling + learning). Timing ratios are within this run. A Ray
+actor's torch runs as many threads as it has CPUs (`--cpus-per-env-runner`).
 Writes `benchmarks/results/rllib.md` (section "PPO throughput").
 """
 
@@ -50,13 +51,15 @@ def sb3_rates(bodies: int, updates: int) -> tuple[float, float]:
     return steps / sampling[0], steps / whole
 
 
-def rllib_rates(bodies: int, updates: int, env_runners: int) -> tuple[float, float]:
-    """(sampling steps/s, whole-update steps/s) of RLlib's PPO with `env_runners` actors (0: the driver samples)."""
+def rllib_rates(bodies: int, updates: int, env_runners: int, cpus: int = 1) -> tuple[float, float]:
+    """(sampling steps/s, whole-update steps/s) of RLlib's PPO with `env_runners` actors of `cpus` CPUs each (0:
+    the driver samples)."""
     from agents.rllib_envs import register_rllib_env
     from agents.train_ppo import PPOTrainConfig
     from agents.train_rllib import algorithm_config, start_ray
 
-    config = PPOTrainConfig(env_id=ENV_ID, num_envs=bodies, init="scratch", engine="rllib", env_runners=env_runners)
+    config = PPOTrainConfig(env_id=ENV_ID, num_envs=bodies, init="scratch", engine="rllib", env_runners=env_runners,
+                            cpus_per_env_runner=cpus)  # fmt: skip
     start_ray(None)
     register_rllib_env(ENV_ID, config.bootstrap_truncation)
     algorithm = algorithm_config(config).build_algo()
@@ -101,9 +104,9 @@ def main(bodies: int = 256, updates: int = 2, curve_from: Path | None = None) ->
         replace_section(RESULTS / "rllib.md", section, title="# Ray and RLlib")
         return 0
     rows = {"SB3 (NativeVecEnv, one process)": sb3_rates(bodies, updates)}
-    for runners in (0, 1):
-        rows[f"RLlib, {runners} env runner{'s' if runners != 1 else ''}"
-             f"{' (the driver samples)' if runners == 0 else ''}"] = rllib_rates(bodies, updates, runners)  # fmt: skip
+    rows["RLlib, 0 env runners (the driver samples)"] = rllib_rates(bodies, updates, 0)
+    for cpus in (1, 2):
+        rows[f"RLlib, 1 env runner of {cpus} CPU{'s' if cpus > 1 else ''}"] = rllib_rates(bodies, updates, 1, cpus)
     base_sampling, base_whole = next(iter(rows.values()))
     lines = ["## PPO throughput", "", machine_line(), "",
              f"GammaReach-v0, {bodies} bodies × 60 primitives per update, α = 10, 256-unit actor-critic, "

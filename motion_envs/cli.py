@@ -191,7 +191,7 @@ def _train_ppo(args: argparse.Namespace) -> int:
              "init": args.init, "log_std_init": args.log_std_init, "learning_rate": args.learning_rate,
              "n_steps": args.n_steps, "anchor": args.anchor, "ship": args.ship or None, "device": args.device,
              "env_kwargs": _env_options(args) or None, "engine": args.engine, "env_runners": args.env_runners,
-             "address": args.address}  # fmt: skip
+             "address": args.address, "cpus_per_env_runner": args.cpus_per_env_runner}  # fmt: skip
     config = PPOTrainConfig(command="motion-envs " + " ".join(sys.argv[1:]),
                             **{name: value for name, value in given.items() if value is not None})  # fmt: skip
     if config.run_dir == PPOTrainConfig.run_dir:
@@ -511,6 +511,8 @@ def parser() -> argparse.ArgumentParser:
                        help="ppo, dqn: Stable-Baselines3 in this process (default) or RLlib on Ray (pip install -e '.[ray]')")
     train.add_argument("--env-runners", type=int, default=None,
                        help="--engine rllib: Ray env-runner actors sharing --num-envs bodies (default 0: the driver samples)")
+    train.add_argument("--cpus-per-env-runner", type=int, default=None,
+                       help="ppo --engine rllib: CPUs (torch threads) per env runner (default 1)")
     train.add_argument("--address", default=None,
                        help="--engine rllib: the Ray cluster to join (e.g. auto, host:6379); default a local Ray")
     train.add_argument("--seed", type=int, default=None)

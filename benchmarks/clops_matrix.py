@@ -35,7 +35,7 @@ import torch
 
 from agents.policy_files import OBSERVATION_FLAGS, read_policy_file
 from agents.train_dqn import OBSERVATION_OPTIONS
-from benchmarks.fanout import run_tasks
+from benchmarks.fanout import group_seed, run_grouped, spans
 from benchmarks.machine import machine_line
 from benchmarks.sections import replace_section
 from motion_envs.atomic import atomic_write
@@ -134,7 +134,7 @@ def run_shard(row: ClopsRow, family: str, first: int, last: int, seed: int) -> d
     state = episodes(core, range(first, last))
     if row.controller == "gamma":
         return gamma_row(core, state)
-    controller = random_actions(seed * 1_000_003 + first) if row.controller == "random" else policy_actions(row.policy)
+    controller = random_actions(group_seed(seed, first)) if row.controller == "random" else policy_actions(row.policy)
     return run(core, state, controller)
 
 
@@ -194,16 +194,12 @@ def main(episodes_per_family: int = 100, families: tuple[str, ...] = tuple(FAMIL
     cluster's address)."""
     torch.manual_seed(seed)
     policies = {path.stem.removeprefix("dqn_clopsnav_"): path for path in sorted(WEIGHTS_DIR.glob("dqn_clopsnav_*.zip"))}
-    groups = [(first, min(first + EPISODES_PER_TASK, episodes_per_family))
-              for first in range(0, episodes_per_family, EPISODES_PER_TASK)]  # fmt: skip
     tasks = [((label, family), (row, family, first, last, seed)) for family in families
-             for label, row in matrix_rows(policies).items() for first, last in groups]  # fmt: skip
+             for label, row in matrix_rows(policies).items() for first, last in spans(episodes_per_family, EPISODES_PER_TASK)]  # fmt: skip
     started = time.perf_counter()
-    results = run_tasks(run_shard, [arguments for _, arguments in tasks], ray_address, "clops episode groups")
     rows: dict[str, dict[str, Scores]] = {}
-    for label, family in dict.fromkeys(key for key, _ in tasks):
-        rows.setdefault(label, {})[family] = scores = scores_of([result for (key, _), result in zip(tasks, results)
-                                                                 if key == (label, family)])  # fmt: skip
+    for (label, family), parts in run_grouped(run_shard, tasks, ray_address, "clops episode groups").items():
+        rows.setdefault(label, {})[family] = scores = scores_of(parts)
         print(f"{label} on {family}: SR {scores.success:.0f}%  Col {scores.collision:.0f}%  FS {scores.skating:.0f}%")
     write_results(rows, families, episodes_per_family, time.perf_counter() - started, ray_address)
     throughput_section(ClopsNavCore(ClopsNavConfig(family=families[0], split="test")), bodies=64, actions=3)

@@ -16,7 +16,7 @@ is still complete; a task that raises fails the run with its exception.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Hashable, Sequence
 from typing import Any
 
 from tqdm import tqdm
@@ -56,3 +56,24 @@ def run_tasks(function: Callable[..., Any], tasks: Sequence[tuple], ray_address:
                 results[pending.pop(reference)] = ray.get(reference)
                 bar.update()
     return results
+
+
+def spans(count: int, size: int) -> list[tuple[int, int]]:
+    """[first, last) ranges of at most `size` items covering 0..count-1: a protocol's fixed split."""
+    return [(first, min(first + size, count)) for first in range(0, count, size)]
+
+
+def group_seed(seed: int, first: int) -> int:
+    """The seed of the task whose items start at `first`: the same wherever the task runs."""
+    return seed * 1_000_003 + first
+
+
+def run_grouped(function: Callable[..., Any], tasks: Sequence[tuple[Hashable, tuple]], ray_address: str | None = None,
+                description: str = "tasks") -> dict[Hashable, list[Any]]:  # fmt: skip
+    """`run_tasks` over `(key, arguments)` pairs; the results of each key (e.g. a table row) in task order, keys in
+    the order they first appear."""
+    results = run_tasks(function, [arguments for _, arguments in tasks], ray_address, description)
+    grouped: dict[Hashable, list[Any]] = {}
+    for (key, _), result in zip(tasks, results):
+        grouped.setdefault(key, []).append(result)
+    return grouped

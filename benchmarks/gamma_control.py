@@ -43,7 +43,7 @@ from tqdm import tqdm
 from agents.controllers import PolicyLatent
 from baselines.g_cvae import G_CVAE_WEIGHTS, goal_cvae_generator
 from baselines.latent_controllers import RandomLatent
-from benchmarks.fanout import run_tasks
+from benchmarks.fanout import group_seed, run_grouped, spans
 from benchmarks.machine import machine_line
 from motion_envs.plots import grid_of_axes, save, top_down
 from motion_envs.atomic import atomic_write
@@ -198,7 +198,7 @@ def run_shard(row: GammaRow, first: int, last: int, seed: int) -> dict:
     began = time.perf_counter()
     core = cached_core(row.precision, row.controller == "g-cvae")
     start = fixed_pairs(core, range(first, last), seed)
-    shard_seed = seed * 1_000_003 + first
+    shard_seed = group_seed(seed, first)
     proposal = PolicyLatent(row.policy, seed=shard_seed) if row.controller == "policy" else RandomLatent(shard_seed)
     if row.keep is None:
         result = run_clones(core, start, proposal, row.clones)
@@ -210,11 +210,8 @@ def run_shard(row: GammaRow, first: int, last: int, seed: int) -> dict:
 
 def run_rows(rows: dict[str, GammaRow], pairs: int, seed: int, ray_address: str | None = None) -> dict[str, dict]:
     """Every row's figures (`summarise`), its pair groups run in this process or over Ray."""
-    groups = [(first, min(first + PAIRS_PER_TASK, pairs)) for first in range(0, pairs, PAIRS_PER_TASK)]
-    tasks = [(label, (row, first, last, seed)) for label, row in rows.items() for first, last in groups]
-    results = run_tasks(run_shard, [arguments for _, arguments in tasks], ray_address, "gamma pair groups")
-    merged = {label: summarise([result for (task_label, _), result in zip(tasks, results) if task_label == label])
-              for label in rows}  # fmt: skip
+    tasks = [(label, (row, first, last, seed)) for label, row in rows.items() for first, last in spans(pairs, PAIRS_PER_TASK)]
+    merged = {label: summarise(parts) for label, parts in run_grouped(run_shard, tasks, ray_address, "gamma pair groups").items()}
     for label, row in merged.items():
         print(f"{label}: success {row['success rate']:.2f} in {row['seconds']:.0f} s")
     return merged

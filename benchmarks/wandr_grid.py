@@ -4,7 +4,7 @@ Goals on a cylinder around each start body: 5 angles equally spaced over
 360° (from the body's forward), 5 heights in 0-1.8 m, 5 ground distances in
 0.5-5 m from the pelvis; 6 start poses (evenly spread over the shipped
 30 fps validation start windows, each facing +y); 5 samples each:
-3,750 rollouts of at most 8 s (240 frames) in one batch. Per row:
+3,750 rollouts of at most 8 s (240 frames), in batches of `SHARD`. Per row:
 
 * SR: the right wrist came within 10 cm of the goal (the rollout stops there);
 * FS: frames whose lowest foot vertex slid more than 0.66 cm (WANDR's
@@ -74,7 +74,7 @@ import torch
 
 from baselines.latent_optimisation import LatentSequence, optimise_latents
 from baselines.wandr_sampler import Controller, WandrSampler, roll_out
-from benchmarks.fanout import run_tasks
+from benchmarks.fanout import run_grouped, spans
 from benchmarks.machine import machine_line
 from benchmarks.sections import replace_rows, replace_section
 from motion_envs.atomic import atomic_write
@@ -173,8 +173,7 @@ class GridRow:
 
     def shards(self) -> list[tuple[int, int]]:
         """[first, last) rollout ranges of `SHARD` rollouts."""
-        count = self.poses * ANGLES * HEIGHTS * DISTANCES * self.samples
-        return [(first, min(first + SHARD, count)) for first in range(0, count, SHARD)]
+        return spans(self.poses * ANGLES * HEIGHTS * DISTANCES * self.samples, SHARD)
 
 
 @functools.lru_cache(maxsize=8)
@@ -221,9 +220,7 @@ def merge_shards(parts: list[dict]) -> dict:
 def run_rows(rows: dict[str, GridRow], seed: int, ray_address: str | None = None) -> dict[str, dict]:
     """Every row's figures ({label: merge_shards(...)}), its shards run in this process or over Ray."""
     tasks = [(label, (row, first, last, seed)) for label, row in rows.items() for first, last in row.shards()]
-    results = run_tasks(run_shard, [arguments for _, arguments in tasks], ray_address, "wandr grid shards")
-    return {label: merge_shards([result for (task_label, _), result in zip(tasks, results) if task_label == label])
-            for label in rows}  # fmt: skip
+    return {label: merge_shards(parts) for label, parts in run_grouped(run_shard, tasks, ray_address, "wandr grid shards").items()}
 
 
 OPTIMISATION_POSES = 2

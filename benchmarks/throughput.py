@@ -14,13 +14,14 @@ section of `benchmarks/results/throughput.md`.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import torch
-from torch.utils.flop_counter import FlopCounterMode
+from torch.utils.flop_counter import FlopCounterMode, register_flop_formula
 
 from agents.vec_env import NativeVecEnv
 from benchmarks.machine import machine_line
@@ -28,6 +29,7 @@ from benchmarks.sections import replace_section
 from motion_envs.envs.gamma_reach import GammaReachConfig, GammaReachCore, GammaReachState, GammaReachVectorEnv
 from motion_envs.precision import native_bf16, resolve_precision
 from motion_envs.priors.gamma_generator import GammaGenerator
+from motion_envs.priors.inference_linear import ONEDNN_LINEAR, linear
 
 RESULTS = Path(__file__).resolve().parent / "results"
 SECTION = "## GAMMA rollout"
@@ -48,11 +50,21 @@ def best_seconds(run: Callable[[], object], repeats: int) -> float:
     return min(times)
 
 
+@torch.no_grad()
 def matmul_flops(dtype: torch.dtype, size: int = 1024) -> float:
-    """FLOP/s of a square fp32/bf16 matmul on this machine (all torch threads)."""
+    """FLOP/s of a square fp32/bf16 matmul on this machine (all torch threads), through the path the priors' linears
+    take at inference (`inference_linear.linear`: oneDNN on the CPU)."""
     a, b = torch.randn(size, size, dtype=dtype), torch.randn(size, size, dtype=dtype)
     repeats = 10 if dtype == torch.float32 else 2
-    return 2 * size**3 * repeats / best_seconds(lambda: [a @ b for _ in range(repeats)], 3)
+    return 2 * size**3 * repeats / best_seconds(lambda: [linear(a, b) for _ in range(repeats)], 3)
+
+
+if ONEDNN_LINEAR is not None:
+
+    @register_flop_formula(ONEDNN_LINEAR)
+    def _onednn_linear_flops(x_shape, w_shape, *args, **kwargs) -> int:
+        """oneDNN's fused linear (x (..., in), weight (out, in)): the matmul's FLOPs, as torch counts `addmm`'s."""
+        return 2 * math.prod(x_shape[:-1]) * w_shape[0] * w_shape[1]
 
 
 def walking_state(core: GammaReachCore, count: int) -> GammaReachState:
@@ -113,7 +125,7 @@ def main(batches: tuple[int, ...] = (64, 128, 256, 512, 1024, 4096), bf16_batche
         "frames, blending, markers and the reward (`GammaReachCore.step`), best of 5. The paper's Table S3: "
         f"{PAPER_SECONDS_1024} s per primitive for 1,024 bodies on a Quadro RTX 6000 GPU ≈ "
         f"{1024 / PAPER_SECONDS_1024:,.0f} body-primitives/s. One body-primitive costs {per_body / 1e6:.1f} MFLOP "
-        f"(torch's FLOP counter). This machine's matmul (1024², same run): fp32 {flops['fp32'] / 1e9:.0f} GFLOP/s, "
+        f"(torch's FLOP counter). This machine's matmul (1024², same run, through oneDNN as the priors' layers): fp32 {flops['fp32'] / 1e9:.0f} GFLOP/s, "
         f"bf16 {flops['bf16'] / 1e9:.1f} GFLOP/s.", "",
         f"At 1,024 bodies: {'; '.join(verdicts)}. `precision=\"auto\"` picks {chosen} on this CPU "
         f"({'native bf16' if native_bf16() else 'no native bf16'}).", "",

@@ -186,29 +186,30 @@ def test_training_writes_to_its_run_folder_unless_shipped(walking_clips, tmp_pat
     assert "replacing the shipped" in capsys.readouterr().err
 
 
-def test_fused_bf16_regressor_blocks_match_the_plain_ones(generator):
-    from motion_envs.priors.gamma import FUSED_LINEAR, ResidualBlock
+@pytest.mark.parametrize("dtype", [torch.float32, torch.bfloat16])
+def test_onednn_linears_match_the_plain_modules(generator, dtype):
+    """The no-grad CPU path (oneDNN: matmul, bias and activation in one call) computes what the modules compute
+    with autograd on (MKL's matmul, then the activation): fp32 to reassociation (1e-5 here), bf16 to its 3 digits.
+    Covers every layer kind the priors use: residual blocks, the tanh MLP, leaky-ReLU layers, a strided weight."""
+    from motion_envs.priors.gamma import PoseVAE, ResidualBlock, tanh_mlp
+    from motion_envs.priors.inference_linear import ONEDNN_LINEAR, linear, takes_onednn
 
-    if FUSED_LINEAR is None or not native_bf16():
-        pytest.skip("no oneDNN fused linear or no native bf16 here: the plain path is the only one")
-    block = ResidualBlock(128).to(torch.bfloat16)
-    x = torch.randn(64, 128, generator=generator).to(torch.bfloat16)
-    with torch.enable_grad():
-        plain = block(x)  # with autograd on, the plain modules run
-    with torch.no_grad():
-        fused = block(x)
-    assert fused.dtype == torch.bfloat16 and torch.allclose(fused.float(), plain.float(), atol=1e-2, rtol=1e-2)
-
-
-def test_fused_bf16_tanh_mlp_matches_the_plain_one(generator):
-    from motion_envs.priors.gamma import FUSED_LINEAR, tanh_mlp
-
-    if FUSED_LINEAR is None or not native_bf16():
-        pytest.skip("no oneDNN fused linear or no native bf16 here: the plain path is the only one")
-    mlp = tanh_mlp([256, 512, 256]).to(torch.bfloat16)
-    x = torch.randn(64, 256, generator=generator).to(torch.bfloat16)
-    with torch.enable_grad():
-        plain = mlp(x)
-    with torch.no_grad():
-        fused = mlp(x)
-    assert torch.allclose(fused.float(), plain.float(), atol=2e-2)
+    x = torch.randn(64, 8, 128, generator=generator).to(dtype)
+    if ONEDNN_LINEAR is None or (dtype == torch.bfloat16 and not native_bf16()):
+        pytest.skip("no oneDNN linear, or bf16 without native bf16 here: the plain path is the only one")
+    tolerance = {"atol": 1e-5, "rtol": 1e-5} if dtype == torch.float32 else {"atol": 2e-2, "rtol": 2e-2}
+    pose_vae = PoseVAE().to(dtype)
+    weight = torch.randn(96, 300, generator=generator).to(dtype)
+    cases = [
+        (ResidualBlock(128).to(dtype), x),
+        (tanh_mlp([128, 512, 256]).to(dtype), x),
+        (lambda poses: pose_vae.encode(poses)[0], torch.randn(64, 21, 6, generator=generator).to(dtype)),
+        (lambda rows: linear(rows, weight[:, 100:]), torch.randn(64, 200, generator=generator).to(dtype)),
+    ]
+    for module, inputs in cases:
+        with torch.enable_grad():
+            plain = module(inputs)
+        with torch.no_grad():
+            assert takes_onednn(inputs)
+            fused = module(inputs)
+        assert fused.dtype == dtype and torch.allclose(fused.float(), plain.float(), **tolerance)

@@ -106,6 +106,13 @@ class BodyModel(nn.Module):
         axes = np.asarray(MANNEQUIN_TO_WORLD)
         self._axis_permutation = [int(i) for i in np.abs(axes).argmax(axis=1)]
         self._axis_signs = [float(axes[i, j]) for i, j in enumerate(self._axis_permutation)]
+        # (A R Aᵀ)ᵀ[i, j] = s_i s_j R[p(j), p(i)] for the signed permutation A[i, p(i)] = s_i: one gather of the
+        # 9 entries instead of two broadcast matmuls (5.4 -> 1.5 ms for 172,032 rotations, 2 cores)
+        permutation, signs = self._axis_permutation, self._axis_signs
+        conjugate_entries = [3 * permutation[j] + permutation[i] for i in range(3) for j in range(3)]
+        conjugate_signs = [signs[i] * signs[j] for i in range(3) for j in range(3)]
+        self.register_buffer("conjugate_entries", torch.tensor(conjugate_entries), persistent=False)
+        self.register_buffer("conjugate_signs", torch.tensor(conjugate_signs), persistent=False)
 
     @property
     def num_vertices(self) -> int:
@@ -191,8 +198,8 @@ class BodyModel(nn.Module):
             planes = body_pose.movedim(-1, 0)
             x, y, z = (-sign * planes[axis] for axis, sign in zip(self._axis_permutation, self._axis_signs))
             return rodrigues(x, y, z)
-        axes = self.axes_to_world.to(body_pose.dtype)
-        return (axes @ rotation_matrix(body_pose) @ axes.T).transpose(-1, -2)
+        entries = rotation_matrix(body_pose).flatten(-2).index_select(-1, self.conjugate_entries)
+        return (entries * self.conjugate_signs.to(entries.dtype)).unflatten(-1, (3, 3))
 
     def skin(self, pose: BodyPose, vertex_ids: torch.Tensor) -> torch.Tensor:
         """Linear-blend skinning of a vertex subset of a pose from `forward`.

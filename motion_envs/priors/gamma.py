@@ -23,12 +23,11 @@ from dataclasses import dataclass
 
 import torch
 from torch import nn
-from torch.nn import functional as F
 
 from motion_envs.body.rotations import matrix_to_axis_angle, matrix_to_sixd, rotation_matrix
 from motion_envs.body.skeleton import NUM_BODY_POSE_JOINTS
 from motion_envs.data.primitives import PRIMITIVE_FRAMES
-from motion_envs.precision import native_bf16
+from motion_envs.priors.inference_linear import InferenceSequential, linear
 
 NUM_MARKERS = 67
 MARKER_DIM = NUM_MARKERS * 3
@@ -36,31 +35,9 @@ BODY_DIM = 3 + 6 + NUM_BODY_POSE_JOINTS * 6
 """Regressor estimate: transl (3), global orient 6-D (6), 21 joints 6-D (126)."""
 
 
-FUSED_LINEAR = getattr(torch.ops.mkldnn, "_linear_pointwise", None) if torch.backends.mkldnn.is_available() else None
-"""oneDNN's linear with a fused activation (what torch.compile's CPU backend calls), where this torch has it."""
-
-
-def fusable(x: torch.Tensor) -> bool:
-    """Whether `x` takes the fused path: bf16 inference on a CPU with native bf16 (oneDNN's bf16 kernels need it),
-    where bf16 elementwise passes (bias, activation) cost as much as the matmuls they follow, and oneDNN does them
-    inside the matmul (same outputs; tested)."""
-    return (FUSED_LINEAR is not None and x.dtype == torch.bfloat16 and x.device.type == "cpu" and not torch.is_grad_enabled()
-            and native_bf16())  # fmt: skip
-
-
-def fused_layers(x: torch.Tensor, linears: list[nn.Linear], activation: str) -> torch.Tensor:
-    """`activation`("relu" | "tanh")(linear(x)) through `linears` in turn, each as one oneDNN call (`fusable` x)."""
-    for linear in linears:
-        x = FUSED_LINEAR(x, linear.weight, linear.bias, activation, [], "")
-    return x
-
-
-class TanhMLP(nn.Sequential):
-    """Linear layers with tanh after every one (the release's MLP); `fusable` inputs take oneDNN's fused
-    linear + tanh (1,024 × 256 -> 512: 0.83 -> 0.27 ms)."""
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return fused_layers(x, list(self[::2]), "tanh") if fusable(x) else super().forward(x)
+class TanhMLP(InferenceSequential):
+    """Linear layers with tanh after every one (the release's MLP); at inference each linear + tanh is one oneDNN
+    call (`inference_linear`; 1,024 × 256 -> 512 in bf16: 0.83 -> 0.27 ms)."""
 
 
 def tanh_mlp(sizes: list[int]) -> TanhMLP:
@@ -108,7 +85,7 @@ class MarkerCVAE(nn.Module):
         self.log_variance = nn.Linear(config.mlp[-1], latent)
         self.initial_state = tanh_mlp([hidden, 512, 256, hidden])
         self.cell = nn.GRUCell(hidden + latent + MARKER_DIM, hidden)
-        self.readout = nn.Sequential(tanh_mlp([hidden, *config.mlp]), nn.Linear(config.mlp[-1], MARKER_DIM))
+        self.readout = InferenceSequential(tanh_mlp([hidden, *config.mlp]), nn.Linear(config.mlp[-1], MARKER_DIM))
 
     def seed_state(self, seed: torch.Tensor) -> torch.Tensor:
         """(B, S, 201 | 402) -> (B, hidden) final GRU state of the seed."""
@@ -133,17 +110,18 @@ class MarkerCVAE(nn.Module):
         previous = seed[:, -1, :MARKER_DIM]
         steady = context.shape[-1] + z.shape[-1]
         weight, bias = self.cell.weight_ih, self.cell.bias_ih
-        constant = F.linear(torch.cat([context, z], dim=-1), weight[:, :steady], bias)  # (B, 3·hidden)
+        constant = linear(torch.cat([context, z], dim=-1), weight[:, :steady], bias)  # (B, 3·hidden)
+        frame_weight = weight[:, steady:].contiguous()
         frames = []
         for _ in range(self.config.future_frames):  # 8 or 9 steps of one primitive, batched over bodies
-            state = self._cell(constant + F.linear(previous, weight[:, steady:]), state)
+            state = self._cell(constant + linear(previous, frame_weight), state)
             previous = previous + self.readout(state)
             frames.append(previous)
         return torch.stack(frames, dim=1)
 
     def _cell(self, projected: torch.Tensor, state: torch.Tensor) -> torch.Tensor:
         """`nn.GRUCell` given its input already projected, `projected` = W_ih x + b_ih (B, 3·hidden)."""
-        hidden = F.linear(state, self.cell.weight_hh, self.cell.bias_hh)
+        hidden = linear(state, self.cell.weight_hh, self.cell.bias_hh)
         reset_in, update_in, new_in = projected.chunk(3, dim=-1)
         reset_h, update_h, new_h = hidden.chunk(3, dim=-1)
         reset, update = torch.sigmoid(reset_in + reset_h), torch.sigmoid(update_in + update_h)
@@ -208,12 +186,14 @@ class BodyRegressorConfig:
 class ResidualBlock(nn.Module):
     def __init__(self, width: int) -> None:
         super().__init__()
-        self.layers = nn.Sequential(nn.Linear(width, width), nn.ReLU(inplace=True), nn.Linear(width, width), nn.ReLU(inplace=True))
+        self.layers = InferenceSequential(
+            nn.Linear(width, width), nn.ReLU(inplace=True), nn.Linear(width, width), nn.ReLU(inplace=True)
+        )
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        """x + relu(W2 relu(W1 x + b1) + b2); `fusable` inputs take oneDNN's fused linear + ReLU (the regressor at
-        1,024 bodies × 8 frames: 33 -> 23 ms)."""
-        return x + (fused_layers(x, [self.layers[0], self.layers[2]], "relu") if fusable(x) else self.layers(x))
+        """x + relu(W2 relu(W1 x + b1) + b2); at inference each linear + ReLU is one oneDNN call (the regressor at
+        1,024 bodies × 8 frames, bf16: 33 -> 23 ms)."""
+        return x + self.layers(x)
 
 
 class BodyRegressor(nn.Module):
@@ -222,7 +202,7 @@ class BodyRegressor(nn.Module):
     def __init__(self, config: BodyRegressorConfig = BodyRegressorConfig()) -> None:
         super().__init__()
         self.config = config
-        self.net = nn.Sequential(
+        self.net = InferenceSequential(
             nn.Linear(MARKER_DIM + BODY_DIM, config.hidden),
             *[ResidualBlock(config.hidden) for _ in range(config.blocks)],
             nn.Linear(config.hidden, BODY_DIM),
@@ -235,9 +215,9 @@ class BodyRegressor(nn.Module):
         flat = markers.reshape(-1, MARKER_DIM)
         estimate = torch.zeros(flat.shape[0], BODY_DIM, dtype=flat.dtype, device=flat.device)
         entry, rest = self.net[0], self.net[1:]
-        from_markers = F.linear(flat, entry.weight[:, :MARKER_DIM], entry.bias)  # the same in every recursion: once
+        from_markers = linear(flat, entry.weight[:, :MARKER_DIM], entry.bias)  # the same in every recursion: once
         for _ in range(self.config.recursions):  # net([markers, estimate]), the first layer split by its inputs
-            estimate = estimate + rest(from_markers + F.linear(estimate, entry.weight[:, MARKER_DIM:]))
+            estimate = estimate + rest(from_markers + linear(estimate, entry.weight[:, MARKER_DIM:]))
         batch = markers.shape[:-2]
         return {
             "transl": estimate[:, :3].reshape(*batch, 3),
@@ -268,21 +248,24 @@ class PoseVAE(nn.Module):
         super().__init__()
         self.config = config
         width = NUM_BODY_POSE_JOINTS * 6
-        self.encoder = nn.Sequential(
+        self.encoder = InferenceSequential(
             nn.Linear(width, config.hidden), nn.LeakyReLU(0.2), nn.Linear(config.hidden, config.hidden), nn.LeakyReLU(0.2)
         )
         self.mean = nn.Linear(config.hidden, config.latent)
         self.log_variance = nn.Linear(config.hidden, config.latent)
-        self.decoder = nn.Sequential(
+        self.decoder = InferenceSequential(
             nn.Linear(config.latent, config.hidden), nn.LeakyReLU(0.2),
             nn.Linear(config.hidden, config.hidden), nn.LeakyReLU(0.2), nn.Linear(config.hidden, width),
         )  # fmt: skip
 
     def encode(self, body_pose: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(..., 21, 3 | 6) poses -> mean, log-variance (..., latent)."""
-        sixd = matrix_to_sixd(rotation_matrix(body_pose)).flatten(-2)
-        hidden = self.encoder(sixd)
-        return self.mean(hidden), self.log_variance(hidden)
+        return self.encode_sixd(matrix_to_sixd(rotation_matrix(body_pose)))
+
+    def encode_sixd(self, sixd: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """`encode` of poses already as orthonormal 6-D rotations (..., 21, 6)."""
+        hidden = self.encoder(sixd.flatten(-2))
+        return linear(hidden, self.mean.weight, self.mean.bias), linear(hidden, self.log_variance.weight, self.log_variance.bias)
 
     def decode(self, z: torch.Tensor) -> torch.Tensor:
         """(..., latent) -> (..., 21, 3, 3) rotation matrices."""

@@ -82,20 +82,24 @@ class GammaSeed(BatchedState):
 class Primitive:
     """One generated primitive of N bodies, world coordinates, 10 frames.
 
-    markers: (N, 10, 67, 3) blended markers. predicted_markers: same, before
-    blending. reprojected_markers: same, skinned from the regressed bodies.
-    Seed frames (`~new_frames()`) hold the seed's markers in all three. joints: (N, 10, 22, 3). transl: (N, 10, 3).
-    global_orient: (N, 10, 6). body_pose: (N, 10, 21, 6). seed_frames: (N,).
+    markers: (N, 10, 67, 3) blended markers. reprojected_markers: same, skinned from the regressed bodies.
+    `predicted_markers`: same, before blending (solved from the other two when asked: one (N, 10, 67, 3) copy
+    less per step). Seed frames (`~new_frames()`) hold the seed's markers in all three. joints: (N, 10, 22, 3).
+    transl: (N, 10, 3). global_orient: (N, 10, 6). body_pose: (N, 10, 21, 6). seed_frames: (N,).
     """
 
     markers: torch.Tensor
-    predicted_markers: torch.Tensor
     reprojected_markers: torch.Tensor
     joints: torch.Tensor
     transl: torch.Tensor
     global_orient: torch.Tensor
     body_pose: torch.Tensor
     seed_frames: torch.Tensor
+
+    @property
+    def predicted_markers(self) -> torch.Tensor:
+        """(N, 10, 67, 3) the predictor's markers: the blend solved for them (float32 rounding, ~1e-6 m)."""
+        return (self.markers - BLEND_FACTOR * self.reprojected_markers) / (1.0 - BLEND_FACTOR)
 
     def new_frames(self) -> torch.Tensor:
         """(N, 10) bool: frames after the seed."""
@@ -143,9 +147,10 @@ class GammaGenerator(torch.nn.Module):
         return self._copies[key]
 
     def pose_latent(self, body_pose: torch.Tensor) -> torch.Tensor:
-        """(..., 21, 6) poses -> (..., latent) the pose VAE's mean (the pose-prior reward's input), in fp32."""
-        dtype = PRECISIONS[self.precision]
-        return self._network("pose_vae").encode(body_pose.to(dtype))[0].float()
+        """(..., 21, 6) poses -> (..., latent) the pose VAE's mean (the pose-prior reward's input), in fp32; the
+        6-D rotations are made orthonormal in fp32 (CPU elementwise passes are faster there than in bf16)."""
+        sixd = matrix_to_sixd(rotation_matrix(body_pose)).to(PRECISIONS[self.precision])
+        return self._network("pose_vae").encode_sixd(sixd)[0].float()
 
     @classmethod
     def load(cls, weights_dir: str | Path = WEIGHTS_DIR) -> GammaGenerator:
@@ -234,30 +239,32 @@ class GammaGenerator(torch.nn.Module):
         pose = regressed["body_pose"]
         joints, reprojected = self.markers_of(transl, orient, pose)
         predicted = to_world(future.flatten(1, 2), frame).unflatten(1, (-1, future.shape[2]))
-        blended = torch.lerp(predicted, reprojected, BLEND_FACTOR)  # (1 − f) predicted + f re-projected
-        new = {"markers": blended, "predicted_markers": predicted, "reprojected_markers": reprojected, "joints": joints,
-               "transl": transl, "global_orient": orient, "body_pose": pose}  # fmt: skip
-        seed_of = {"predicted_markers": "markers", "reprojected_markers": "markers"}
-        return {name: torch.cat([seed_world[seed_of.get(name, name)], value], dim=1) for name, value in new.items()}
+        markers = seed_world["markers"].new_empty((len(rows), PRIMITIVE_FRAMES, *predicted.shape[2:]))
+        markers[:, :frames] = seed_world["markers"]
+        torch.lerp(predicted, reprojected, BLEND_FACTOR, out=markers[:, frames:])  # (1 − f) predicted + f re-projected
+        new = {"reprojected_markers": reprojected, "joints": joints, "transl": transl, "global_orient": orient,
+               "body_pose": pose}  # fmt: skip
+        seed_of = {"reprojected_markers": "markers"}
+        fields = {name: torch.cat([seed_world[seed_of.get(name, name)], value], dim=1) for name, value in new.items()}
+        return {"markers": markers, **fields}
 
 
 SEED_FIELDS = ("markers", "joints", "transl", "global_orient", "body_pose")
 FOOT_MARKER_IDS = tuple(MARKER_NAMES.index(name) for name in FOOT_MARKERS)
-POSITION_FIELDS = ("markers", "predicted_markers", "reprojected_markers", "joints", "transl")
+POSITION_FIELDS = ("markers", "reprojected_markers", "joints", "transl")
 
 
 def _grounded(fields: dict[str, torch.Tensor], seed_frames: torch.Tensor) -> dict[str, torch.Tensor]:
-    """`Primitive` fields (N, 10, ...) with each new frame moved vertically so that the lowest of its foot
-    markers (heel, toe, sole under the ball: within 0.5 cm of the sole at rest) is at z = 0."""
+    """`Primitive` fields (N, 10, ...), made in this step, with each new frame moved vertically (in place) so that
+    the lowest of its foot markers (heel, toe, sole under the ball: within 0.5 cm of the sole at rest) is at
+    z = 0."""
     new = torch.arange(PRIMITIVE_FRAMES, device=seed_frames.device) >= seed_frames[:, None]  # (N, 10)
     feet = fields["markers"][:, :, FOOT_MARKER_IDS, 2].amin(-1)  # (N, 10)
     lift = torch.where(new, -feet, torch.zeros_like(feet))  # (N, 10)
-    grounded = dict(fields)
     for name in POSITION_FIELDS:
-        value = fields[name].clone()
+        value = fields[name]
         value[..., 2] += lift if value.dim() == 3 else lift[..., None]
-        grounded[name] = value
-    return grounded
+    return fields
 
 
 def _merge(parts: list[tuple[torch.Tensor, dict[str, torch.Tensor]]], count: int) -> dict[str, torch.Tensor]:

@@ -25,6 +25,7 @@ from torch import nn
 
 from motion_envs.body import BodyModel, BodyPose
 from motion_envs.body.markers import foot_vertex_ids
+from motion_envs.priors.inference_linear import InferenceSequential
 from motion_envs.priors.wandr_features import (
     CONDITION_DIM, DELTA_DIM, INTENTIONS, WandrState, condition, integrate, intention, make_state,
 )  # fmt: skip
@@ -64,14 +65,15 @@ def release_widths(fan_in: int, fan_out: int, layers: int, max_width: int) -> li
     return [fan_in, *hidden, fan_out]
 
 
-def layer_norm_mlp(sizes: list[int], dropout: float) -> nn.Sequential:
-    """LayerNorm → dropout → Linear (→ ReLU except after the last) for each consecutive pair of sizes."""
+def layer_norm_mlp(sizes: list[int], dropout: float) -> InferenceSequential:
+    """LayerNorm → dropout → Linear (→ ReLU except after the last) for each consecutive pair of sizes; at inference
+    each linear and its ReLU are one oneDNN call (`inference_linear`)."""
     blocks: list[nn.Module] = []
     for index, (fan_in, fan_out) in enumerate(zip(sizes[:-1], sizes[1:])):
         blocks += [nn.LayerNorm(fan_in), nn.Dropout(dropout), nn.Linear(fan_in, fan_out)]
         if index < len(sizes) - 2:
             blocks.append(nn.ReLU())
-    return nn.Sequential(*blocks)
+    return InferenceSequential(*blocks)
 
 
 class WandrPrior(nn.Module):

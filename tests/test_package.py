@@ -76,3 +76,17 @@ def test_the_gpu_checks_rollouts_run_on_the_cpu():
     assert gamma.shape == (2, 3, 10, 68, 3) and wandr.shape == (4, 3, 22, 3)
     assert torch.isfinite(gamma).all() and torch.isfinite(wandr).all()
     assert (gamma[1, :, -1, -1] - gamma[0, :, 0, -1]).norm(dim=-1).max() > 0  # the pelvis moved
+
+
+def test_machine_line_names_the_cpu_and_any_instruction_set_limit(monkeypatch):
+    """Every benchmark's machine line: the CPU flags that decide the kernels, and an ISA limit where one is set (an
+    estimate of an older CPU on a newer one must say so)."""
+    from benchmarks.machine import machine_line
+    from motion_envs import precision
+
+    monkeypatch.setattr(precision, "cpu_flags", lambda: frozenset({"avx2", "fma"}))
+    monkeypatch.delenv("ONEDNN_MAX_CPU_ISA", raising=False)
+    line = machine_line()
+    assert "CPU flags avx2, fma (no native bf16 (emulated))" in line and "limited" not in line
+    monkeypatch.setenv("ONEDNN_MAX_CPU_ISA", "AVX2")
+    assert "kernels limited by ONEDNN_MAX_CPU_ISA=AVX2" in machine_line()

@@ -194,21 +194,26 @@ def test_generator_steps_mixed_one_and_two_frame_seeds_as_separate_batches(gamma
     assert together.new_frames().sum(dim=1).tolist() == [9, 8]
 
 
-def test_floor_rule_puts_every_new_frames_lowest_foot_marker_on_the_ground_and_moves_only_height(gamma):
-    """`ground_feet` shifts each new frame vertically and nothing else; without it the raw prior drifts."""
-    from motion_envs.body.markers import FOOT_MARKERS, MARKER_NAMES
+def test_floor_rule_puts_every_new_frames_lowest_sole_point_on_the_ground_and_moves_only_height(gamma, body):
+    """`ground_feet` shifts each new frame vertically and nothing else, so that the soles' rims touch the floor and
+    no foot vertex is below it (the rims stand in for the whole foot's hull); without it the raw prior drifts."""
+    from motion_envs.body.markers import foot_vertex_ids, sole_hull_vertex_ids
 
     env = GammaReachEnv(generator=gamma, precision="float32")
     env.reset(seed=8)
     seed = env.state.seed
-    feet = [MARKER_NAMES.index(name) for name in FOOT_MARKERS]
     z = 3.0 * torch.as_tensor(_latents(1, 8))  # far latents: the raw prior leaves the floor
     raw, _ = gamma.step(seed, z)
     grounded, _ = gamma.step(seed, z, ground_feet=True)
     new = grounded.new_frames()[0]
-    lowest = grounded.markers[0, :, feet, 2].amin(-1)
-    assert torch.allclose(lowest[new], torch.zeros(int(new.sum())), atol=1e-5)
-    assert raw.markers[0, new][:, feet, 2].amin(-1).abs().max() > 0.01  # the rule had something to do
+
+    def lowest(primitive, vertex_ids):
+        posed = body(primitive.transl[0], primitive.global_orient[0], primitive.body_pose[0])
+        return body.skin(posed, vertex_ids)[..., 2].amin(-1)  # (10,)
+
+    assert torch.allclose(lowest(grounded, sole_hull_vertex_ids())[new], torch.zeros(int(new.sum())), atol=1e-5)
+    assert lowest(grounded, foot_vertex_ids())[new].min() > -0.005
+    assert lowest(raw, sole_hull_vertex_ids())[new].abs().max() > 0.01  # the rule had something to do
     shift = grounded.joints - raw.joints
     assert torch.allclose(shift[..., :2], torch.zeros_like(shift[..., :2]), atol=1e-5)
     assert torch.allclose(shift[..., 2], shift[..., :1, 2].expand_as(shift[..., 2]), atol=1e-5)  # one height a frame

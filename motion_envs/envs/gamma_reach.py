@@ -44,8 +44,8 @@ the ground, at least `min_goal_distance` from the start.
 
 ## Floor
 
-With `ground_feet` (default) each new frame is moved vertically so that the body's lowest foot marker
-touches the ground, as WandrReach's rule: the prior's height drifts (random latents bury a body or fly it
+With `ground_feet` (default) each new frame is moved vertically so that the body's lowest sole point (of the
+soles' convex hulls) touches the ground, as WandrReach's rule: the prior's height drifts (random latents bury a body or fly it
 metres up) and a walking body always has a foot down. The realism benchmarks also measure the prior
 without it (`ground_feet=False`).
 
@@ -126,7 +126,7 @@ class GammaReachConfig:
     """Folder with the GAMMA weights (default: the shipped ones)."""
     device: str = "cpu"
     ground_feet: bool = True
-    """The floor rule: each new frame is moved vertically so the body's lowest foot marker is on the ground
+    """The floor rule: each new frame is moved vertically so the body's lowest sole point is on the ground
     (`GammaGenerator.step`); False shows the raw prior, whose height drifts."""
     precision: str = "auto"
     """The prior's networks: "float32", "bfloat16", or "auto": bf16 where the device multiplies it natively

@@ -14,7 +14,10 @@ and N latent codes and, batched over bodies:
    re-projected markers (the paper's "ours-ro", release factor 0.5), so a
    body never drifts more than half the prediction error from its markers;
 5. with `ground_feet` (the envs' floor rule, as WANDR's stepper), lifts or
-   lowers each new frame so that its lowest foot marker is on the floor: our
+   lowers each new frame so that its body's lowest sole point (the soles'
+   convex hulls, `sole_hull_vertex_ids`, skinned with the markers: 50 rows)
+   is on the floor (grounding the lowest foot marker instead left 0.3-0.7% of
+   frames with the mesh more than 3 cm below the floor, tipped feet): our
    small-data prior's height drifts (random latents bury a body or fly it
    metres up), and a walking body always has a foot down (GAMMA generates
    walking; a jump would be pulled down); the seed frames are the previous
@@ -44,7 +47,7 @@ import torch
 
 from motion_envs.batched import BatchedState
 from motion_envs.body import BodyModel
-from motion_envs.body.markers import FOOT_MARKERS, MARKER_NAMES, marker_ids
+from motion_envs.body.markers import marker_ids, sole_hull_vertex_ids
 from motion_envs.body.rotations import matrix_to_sixd, rotation_matrix
 from motion_envs.data.primitives import PRIMITIVE_FRAMES
 from motion_envs.body.canonical_frame import CanonicalFrame, canonical_frame, goal_observation, to_canonical, to_world
@@ -121,6 +124,8 @@ class GammaGenerator(torch.nn.Module):
         self.regressor, self.pose_vae = regressor, pose_vae
         self.body = BodyModel()
         self.register_buffer("marker_rows", self.body.skin_rows(marker_ids()), persistent=False)
+        surface = torch.cat([marker_ids(), sole_hull_vertex_ids()])
+        self.register_buffer("surface_rows", self.body.skin_rows(surface), persistent=False)  # markers, then soles
         self.requires_grad_(False)
         self.eval()
         self.precision = "float32"
@@ -206,8 +211,9 @@ class GammaGenerator(torch.nn.Module):
                 parts.append((rows, self._group(seed, rows, seed_slot[rows, 2 - frames :], group_frame, model, z[rows],
                                                 None if goal is None else goal[rows], first[rows])))  # fmt: skip
         fields = _merge(parts, count)
+        lowest_sole = fields.pop("lowest_sole")
         if ground_feet:
-            fields = _grounded(fields, seed.seed_frames)
+            _ground(fields, lowest_sole, seed.seed_frames)
         primitive = Primitive(**fields, seed_frames=seed.seed_frames)
         next_seed = GammaSeed(
             torch.full_like(seed.seed_frames, 2), primitive.markers[:, -2:], primitive.joints[:, -2:],
@@ -220,7 +226,7 @@ class GammaGenerator(torch.nn.Module):
         """The primitive of the M bodies `rows` whose seeds have S = `slots.shape[1]` frames (their slots in the
         seed: (M, S)): the 10 - S new frames predicted, regressed to bodies and re-projected (only those: the S seed
         frames are the seed's own bodies and markers), then the seed frames put in front. Returns `Primitive`'s
-        fields, (M, 10, ...) each."""
+        fields, (M, 10, ...) each, and "lowest_sole" (M, 10): each new frame's lowest sole point (0 at seed frames)."""
         frames = slots.shape[1]
         seed_world = {name: getattr(seed, name)[rows[:, None], slots] for name in SEED_FIELDS}  # (M, S, ...)
         group_seed = to_canonical(seed_world["markers"].flatten(1, 2), frame).unflatten(1, (frames, -1))  # (M, S, 67, 3)
@@ -237,7 +243,9 @@ class GammaGenerator(torch.nn.Module):
         transl = to_world(regressed["transl"], frame)
         orient = matrix_to_sixd(frame.rotation[:, None] @ rotation_matrix(regressed["global_orient"]))
         pose = regressed["body_pose"]
-        joints, reprojected = self.markers_of(transl, orient, pose)
+        posed = self.body(transl, orient, pose)
+        surface = self.body.skin_with_rows(posed, self.surface_rows)  # (M, 10 - S, 67 + soles, 3)
+        joints, reprojected = posed.joints, surface[..., : len(self.marker_rows), :]
         predicted = to_world(future.flatten(1, 2), frame).unflatten(1, (-1, future.shape[2]))
         markers = seed_world["markers"].new_empty((len(rows), PRIMITIVE_FRAMES, *predicted.shape[2:]))
         markers[:, :frames] = seed_world["markers"]
@@ -246,25 +254,22 @@ class GammaGenerator(torch.nn.Module):
                "body_pose": pose}  # fmt: skip
         seed_of = {"reprojected_markers": "markers"}
         fields = {name: torch.cat([seed_world[seed_of.get(name, name)], value], dim=1) for name, value in new.items()}
-        return {"markers": markers, **fields}
+        soles = surface[..., len(self.marker_rows) :, 2].amin(-1)  # (M, 10 - S)
+        return {"markers": markers, **fields, "lowest_sole": torch.cat([soles.new_zeros(len(rows), frames), soles], 1)}
 
 
 SEED_FIELDS = ("markers", "joints", "transl", "global_orient", "body_pose")
-FOOT_MARKER_IDS = tuple(MARKER_NAMES.index(name) for name in FOOT_MARKERS)
 POSITION_FIELDS = ("markers", "reprojected_markers", "joints", "transl")
 
 
-def _grounded(fields: dict[str, torch.Tensor], seed_frames: torch.Tensor) -> dict[str, torch.Tensor]:
-    """`Primitive` fields (N, 10, ...), made in this step, with each new frame moved vertically (in place) so that
-    the lowest of its foot markers (heel, toe, sole under the ball: within 0.5 cm of the sole at rest) is at
-    z = 0."""
+def _ground(fields: dict[str, torch.Tensor], lowest_sole: torch.Tensor, seed_frames: torch.Tensor) -> None:
+    """Move each new frame of `Primitive` fields (N, 10, ...), made in this step, vertically in place so that its
+    lowest sole point (`lowest_sole`, (N, 10) heights) is at z = 0; seed frames stay."""
     new = torch.arange(PRIMITIVE_FRAMES, device=seed_frames.device) >= seed_frames[:, None]  # (N, 10)
-    feet = fields["markers"][:, :, FOOT_MARKER_IDS, 2].amin(-1)  # (N, 10)
-    lift = torch.where(new, -feet, torch.zeros_like(feet))  # (N, 10)
+    lift = torch.where(new, -lowest_sole, torch.zeros_like(lowest_sole))  # (N, 10)
     for name in POSITION_FIELDS:
         value = fields[name]
         value[..., 2] += lift if value.dim() == 3 else lift[..., None]
-    return fields
 
 
 def _merge(parts: list[tuple[torch.Tensor, dict[str, torch.Tensor]]], count: int) -> dict[str, torch.Tensor]:

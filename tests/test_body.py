@@ -67,8 +67,12 @@ def test_skinning_matches_mannequin_vertices(generator):
     transl, orient, pose = _random_pose(generator, 200)
     _, vertices, _ = _mannequin_reference(transl, orient, pose, with_vertices=True)
     ids = torch.cat([marker_ids(), foot_vertex_ids(), torch.arange(0, body.num_vertices, 97)])
-    skinned = body.skin(body(transl, orient, pose), ids)
+    posed = body(transl, orient, pose)
+    skinned = body.skin(posed, ids)
     assert (skinned - vertices[:, ids]).abs().max() < 1e-4
+    grid = body(transl[:10].unflatten(0, (2, 5)), orient[:10].unflatten(0, (2, 5)), pose[:10].unflatten(0, (2, 5)))
+    heights = body.heights_with_rows(grid, body.skin_rows(ids))  # (2, 5, V): the z of `skin`, batch shape kept
+    assert heights.shape == (2, 5, len(ids)) and (heights.flatten(0, 1) - vertices[:10, ids, 2]).abs().max() < 1e-4
 
 
 def test_six_d_rotations_give_the_same_pose(body, generator):

@@ -224,6 +224,12 @@ class BodyModel(nn.Module):
         vertices = (reading.to(rows.dtype) @ rows).reshape(len(reading), size, 3).transpose(0, 1)
         return vertices.reshape(*pose.joints.shape[:-2], len(reading), 3)
 
+    def heights_with_rows(self, pose: BodyPose, reading: torch.Tensor) -> torch.Tensor:
+        """The heights (z) of `skin_with_rows`' vertices -> (..., V): a third of its matmul and output."""
+        rows = pose.frame_rows
+        heights = reading.to(rows.dtype) @ rows.unflatten(1, (-1, 3))[..., 2]  # (V, size)
+        return heights.transpose(0, 1).reshape(*pose.joints.shape[:-2], len(reading))
+
     def skin_rows(self, vertex_ids: torch.Tensor) -> torch.Tensor:
         """(V, 67) matrix taking `BodyPose.frame_rows` to vertex positions."""
         joints = self.skin_joints[vertex_ids]  # (V, K)

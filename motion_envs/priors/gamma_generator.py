@@ -15,7 +15,7 @@ and N latent codes and, batched over bodies:
    body never drifts more than half the prediction error from its markers;
 5. with `ground_feet` (the envs' floor rule, as WANDR's stepper), lifts or
    lowers each new frame so that its body's lowest sole point (the soles'
-   convex hulls, `sole_hull_vertex_ids`, skinned with the markers: 50 rows)
+   convex hulls, `sole_hull_vertex_ids`: 50 vertices, heights only)
    is on the floor (grounding the lowest foot marker instead left 0.3-0.7% of
    frames with the mesh more than 3 cm below the floor, tipped feet): our
    small-data prior's height drifts (random latents bury a body or fly it
@@ -124,8 +124,7 @@ class GammaGenerator(torch.nn.Module):
         self.regressor, self.pose_vae = regressor, pose_vae
         self.body = BodyModel()
         self.register_buffer("marker_rows", self.body.skin_rows(marker_ids()), persistent=False)
-        surface = torch.cat([marker_ids(), sole_hull_vertex_ids()])
-        self.register_buffer("surface_rows", self.body.skin_rows(surface), persistent=False)  # markers, then soles
+        self.register_buffer("sole_rows", self.body.skin_rows(sole_hull_vertex_ids()), persistent=False)
         self.requires_grad_(False)
         self.eval()
         self.precision = "float32"
@@ -244,8 +243,7 @@ class GammaGenerator(torch.nn.Module):
         orient = matrix_to_sixd(frame.rotation[:, None] @ rotation_matrix(regressed["global_orient"]))
         pose = regressed["body_pose"]
         posed = self.body(transl, orient, pose)
-        surface = self.body.skin_with_rows(posed, self.surface_rows)  # (M, 10 - S, 67 + soles, 3)
-        joints, reprojected = posed.joints, surface[..., : len(self.marker_rows), :]
+        joints, reprojected = posed.joints, self.body.skin_with_rows(posed, self.marker_rows)
         predicted = to_world(future.flatten(1, 2), frame).unflatten(1, (-1, future.shape[2]))
         markers = seed_world["markers"].new_empty((len(rows), PRIMITIVE_FRAMES, *predicted.shape[2:]))
         markers[:, :frames] = seed_world["markers"]
@@ -254,7 +252,7 @@ class GammaGenerator(torch.nn.Module):
                "body_pose": pose}  # fmt: skip
         seed_of = {"reprojected_markers": "markers"}
         fields = {name: torch.cat([seed_world[seed_of.get(name, name)], value], dim=1) for name, value in new.items()}
-        soles = surface[..., len(self.marker_rows) :, 2].amin(-1)  # (M, 10 - S)
+        soles = self.body.heights_with_rows(posed, self.sole_rows).amin(-1)  # (M, 10 - S)
         return {"markers": markers, **fields, "lowest_sole": torch.cat([soles.new_zeros(len(rows), frames), soles], 1)}
 
 

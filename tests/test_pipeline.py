@@ -122,6 +122,37 @@ def test_cache_rebuild_is_skipped_when_nothing_changed_and_redone_when_a_source_
     assert changed.rebuilt and changed.caches[30] != first.caches[30]
 
 
+def test_a_killed_build_resumes_from_its_finished_clips(tmp_path, monkeypatch):
+    """Each finished clip is kept beside the cache, so a build killed after it does not load it again; the parts go
+    once the cache is written, and the resumed cache equals an uninterrupted one."""
+    from motion_envs.data import build as build_module
+
+    mocap = tmp_path / "mocap" / "subject1"
+    _write_amass_folder(mocap)
+    _write_amass_folder(tmp_path / "mocap" / "subject2", seed=1)
+    loaded = []
+    real_load = build_module.load_clip
+
+    def load_then_die(source, *args):
+        if loaded:
+            raise KeyboardInterrupt  # the kill, after the first clip
+        loaded.append(source.relative)
+        return real_load(source, *args)
+
+    monkeypatch.setattr(build_module, "load_clip", load_then_die)
+    with pytest.raises(KeyboardInterrupt):
+        build(mocap_dir=tmp_path / "mocap", cache_dir=tmp_path / "cache", fps_list=(30,), progress=False)
+    assert len(list((tmp_path / "cache").glob("*.parts/*.pkl"))) == 1
+    monkeypatch.setattr(build_module, "load_clip", lambda source, *args: loaded.append(source.relative) or real_load(source, *args))
+    resumed = build(mocap_dir=tmp_path / "mocap", cache_dir=tmp_path / "cache", fps_list=(30,), progress=False)
+    assert loaded[0] != loaded[1] and len(loaded) == 2 and resumed.clips == 2  # the second clip only
+    assert not list((tmp_path / "cache").glob("*.parts"))
+    fresh = build(mocap_dir=tmp_path / "mocap", cache_dir=tmp_path / "fresh", fps_list=(30,), progress=False)
+    resumed_arrays, fresh_arrays = np.load(resumed.caches[30]), np.load(fresh.caches[30])
+    for name in ("transl", "global_orient", "body_pose", "clip_file"):
+        np.testing.assert_array_equal(resumed_arrays[name], fresh_arrays[name])
+
+
 def test_missing_mocap_folder_is_a_clear_error(tmp_path):
     with pytest.raises(FileNotFoundError, match="does not exist"):
         build(mocap_dir=tmp_path / "nowhere", cache_dir=tmp_path / "cache", progress=False)

@@ -10,11 +10,15 @@ Cleanup (`motion_envs.data.cleanup`: contacts, floor, foot locking) is on by
 default and part of the cache key; `cleanup=None` (`--no-cleanup`) builds the
 uncleaned data to compare. The cache holds each frame's sole contacts
 (`contacts`, (T, 4) bool, `SOLE_POINTS` order; all False without cleanup).
+A killed build resumes: each finished clip (or its failure) is kept in a part
+file beside the cache (`<cache>.parts/`), which goes once the cache is written.
 """
 
 from __future__ import annotations
 
 import hashlib
+import pickle
+import shutil
 import sys
 from dataclasses import dataclass, field
 from importlib.metadata import version
@@ -197,23 +201,43 @@ def build(
         if path.exists():
             continue
         report.rebuilt = True
+        parts = path.with_suffix(".parts")  # one file per finished clip: a killed build resumes from there
+        parts.mkdir(exist_ok=True)
         clips: list[tuple[ClipSource, BodyMotion]] = []
         failures: list[str] = []
-        for source in tqdm(sources, desc=f"retarget @ {fps} fps", disable=not progress, unit="clip"):
-            try:
-                motion = load_clip(source, fps, body, retarget_config, cleanup)
-                check_plausible(motion, source.relative)
+        for index, source in enumerate(tqdm(sources, desc=f"retarget @ {fps} fps", disable=not progress, unit="clip")):
+            motion, failure = _clip_or_failure(parts / f"{index:05d}.pkl", source, fps, body, retarget_config, cleanup)
+            if motion is not None:
                 clips.append((source, motion))
-            except Exception as error:  # one bad file must not abort the build: report it, build the rest
-                reason = str(error) if isinstance(error, (MocapFormatError, UnknownSkeletonError, ValueError)) else f"{type(error).__name__}: {error}"
-                failures.append(f"{source.relative}: {reason}")
-                tqdm.write(f"skipped {source.relative}: {reason}", file=sys.stderr)
+            else:
+                failures.append(f"{source.relative}: {failure}")
+                tqdm.write(f"skipped {source.relative}: {failure}", file=sys.stderr)
         if not clips:
             raise RuntimeError(f"every clip under {mocap_dir} failed ({len(failures)}):\n  {_failure_summary(failures)}")
         _write_cache(path, clips, failures, fps, mocap_dir, cleanup)
+        shutil.rmtree(parts)
         report.failures = failures
     report.clips = len(sources) - len(report.failures)
     return report
+
+
+def _clip_or_failure(part: Path, source: ClipSource, fps: int, body: BodyModel, retarget_config: RetargetConfig,
+                     cleanup: CleanupConfig | None) -> tuple[BodyMotion | None, str | None]:  # fmt: skip
+    """One source's clip, or why it failed (one bad file must not abort the build: it is reported, the rest built).
+    `part` keeps the outcome: a build killed later reads it back instead of loading the clip again (the part
+    folder is named by the cache's content hash, so a part never outlives its sources, settings or code)."""
+    if part.exists():
+        with open(part, "rb") as file:
+            return pickle.load(file)
+    try:
+        motion = load_clip(source, fps, body, retarget_config, cleanup)
+        check_plausible(motion, source.relative)
+        outcome = (motion, None)
+    except Exception as error:
+        known = isinstance(error, (MocapFormatError, UnknownSkeletonError, ValueError))
+        outcome = (None, str(error) if known else f"{type(error).__name__}: {error}")
+    atomic_write(part, lambda file: pickle.dump(outcome, file))
+    return outcome
 
 
 def _write_cache(path: Path, clips: list[tuple[ClipSource, BodyMotion]], failures: list[str], fps: int,

@@ -197,7 +197,8 @@ def test_generator_steps_mixed_one_and_two_frame_seeds_as_separate_batches(gamma
 def test_floor_rule_puts_every_new_frames_lowest_sole_point_on_the_ground_and_moves_only_height(gamma, body):
     """`ground_feet` shifts each new frame vertically and nothing else, so that the soles' rims touch the floor and
     no foot vertex is below it (the rims stand in for the whole foot's hull); without it the raw prior drifts."""
-    from motion_envs.body.markers import foot_vertex_ids, sole_hull_vertex_ids
+    from motion_envs.body.markers import foot_vertex_ids
+    from motion_envs.body.soles import sole_hull_vertex_ids
 
     env = GammaReachEnv(generator=gamma, precision="float32")
     env.reset(seed=8)

@@ -47,7 +47,8 @@ import torch
 
 from motion_envs.batched import BatchedState
 from motion_envs.body import BodyModel
-from motion_envs.body.markers import marker_ids, sole_hull_vertex_ids
+from motion_envs.body.markers import marker_ids
+from motion_envs.body.soles import sole_hull_vertex_ids
 from motion_envs.body.rotations import matrix_to_sixd, rotation_matrix
 from motion_envs.data.primitives import PRIMITIVE_FRAMES
 from motion_envs.body.canonical_frame import CanonicalFrame, canonical_frame, goal_observation, to_canonical, to_world

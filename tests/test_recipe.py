@@ -14,7 +14,7 @@ def test_stages_fill_in_the_weights_they_start_from_and_unknown_ones_fail(tmp_pa
     clops = recipe.stages_named(["clops"])[0]
     argv = recipe.stage_argv(clops, tmp_path, ["--mocap-dir", "m"])
     assert argv[:2] == ["train", "clops"]
-    assert argv[argv.index("--prior-init") + 1] == str(tmp_path / "clops_stage1" / "clops.pt")
+    assert argv[argv.index("--prior-init") + 1] == str(tmp_path / "clops_stage2" / "clops.pt")
     assert argv[argv.index("--weights") + 1] == str(tmp_path / "clops" / "clops.pt") and argv[-2:] == ["--mocap-dir", "m"]
     with pytest.raises(ValueError, match="unknown stage.*wandr"):
         recipe.stages_named(["wandr", "nope"])
@@ -23,7 +23,7 @@ def test_stages_fill_in_the_weights_they_start_from_and_unknown_ones_fail(tmp_pa
 
 def test_a_stage_needs_the_stages_it_starts_from(tmp_path, capsys):
     assert main(["train", "priors", "--stages", "clops", "--run-dir", str(tmp_path)]) == 1
-    assert "starts from clops_stage1" in capsys.readouterr().err
+    assert "starts from clops_stage2" in capsys.readouterr().err
 
 
 def test_finished_stages_are_skipped_and_shipped_with_their_record(tmp_path, monkeypatch, capsys):

@@ -19,7 +19,8 @@ WANDR's prior is trained with rollouts of at most 10 frames (`wandr_short`), the
 to 60 (`wandr`): trained on 0.33 s of its own output only, it folded over within 15 s of sampled walking (trunk
 tilt 36° and growing, head 0.53 m over the 15th second; after the fine-tune ~20° and 1.13 m). Its 10 minutes are
 estimated from its last epochs alone (1.3 s a batch; the measured run shared the cores with a data build: 34
-minutes). CLOPS starts from `wandr_short`, as its shipped prior did.
+minutes). CLOPS starts from `wandr_short`, as its shipped prior did, and gets the same fine-tune last
+(`clops`: rollouts of up to 60 frames, 8 minutes measured alone).
 """
 
 from __future__ import annotations
@@ -65,8 +66,10 @@ RECIPE: tuple[Stage, ...] = (
     Stage("wandr", ("wandr", "--prior-init", "{wandr_short}", "--epochs", "6", "--max-rollout", "60", "--window-stride", "2",
                     "--late-kl-weight", "0.1", "--kl-raise-epoch", "0"), "wandr.pt", 10, needs=("wandr_short",)),
     Stage("clops_stage1", ("clops", "--prior-init", "{wandr_short}"), "clops.pt", 6, needs=("wandr_short",), ships=False),
-    Stage("clops", ("clops", "--prior-init", "{clops_stage1}", "--max-rollout", "30", "--epochs", "6"), "clops.pt", 7,
-          needs=("clops_stage1",)),
+    Stage("clops_stage2", ("clops", "--prior-init", "{clops_stage1}", "--max-rollout", "30", "--epochs", "6"), "clops.pt", 7,
+          needs=("clops_stage1",), ships=False),
+    Stage("clops", ("clops", "--prior-init", "{clops_stage2}", "--max-rollout", "60", "--epochs", "6", "--window-stride", "2"),
+          "clops.pt", 8, needs=("clops_stage2",)),
     Stage("gamma_predictor_1f", ("gamma", "--stage", "predictor", "--seed-frames", "1", "--epochs", "8", "--rollout-epochs", "0"),
           "gamma_predictor_1f.pt", 5),
     Stage("gamma_predictor_2f", ("gamma", "--stage", "predictor", "--seed-frames", "2", "--epochs", "8", "--rollout-epochs", "0"),

@@ -125,7 +125,8 @@ def main(batches: tuple[int, ...] = (64, 128, 256, 512, 1024, 4096), bf16_batche
         "frames, blending, markers and the reward (`GammaReachCore.step`), best of 5. The paper's Table S3: "
         f"{PAPER_SECONDS_1024} s per primitive for 1,024 bodies on a Quadro RTX 6000 GPU ≈ "
         f"{1024 / PAPER_SECONDS_1024:,.0f} body-primitives/s. One body-primitive costs {per_body / 1e6:.1f} MFLOP "
-        f"(torch's FLOP counter). This machine's matmul (1024², same run, through oneDNN as the priors' layers): fp32 {flops['fp32'] / 1e9:.0f} GFLOP/s, "
+        f"(torch's FLOP counter). This machine's matmul (1024², same run, through oneDNN as the priors' layers): "
+        f"fp32 {flops['fp32'] / 1e9:.0f} GFLOP/s, "
         f"bf16 {flops['bf16'] / 1e9:.1f} GFLOP/s.", "",
         f"At 1,024 bodies: {'; '.join(verdicts)}. `precision=\"auto\"` picks {chosen} on this CPU "
         f"({'native bf16' if native_bf16() else 'no native bf16'}).", "",

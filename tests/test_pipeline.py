@@ -143,7 +143,11 @@ def test_a_killed_build_resumes_from_its_finished_clips(tmp_path, monkeypatch):
     with pytest.raises(KeyboardInterrupt):
         build(mocap_dir=tmp_path / "mocap", cache_dir=tmp_path / "cache", fps_list=(30,), progress=False)
     assert len(list((tmp_path / "cache").glob("*.parts/*.pkl"))) == 1
-    monkeypatch.setattr(build_module, "load_clip", lambda source, *args: loaded.append(source.relative) or real_load(source, *args))
+    def load_and_count(source, *args):
+        loaded.append(source.relative)
+        return real_load(source, *args)
+
+    monkeypatch.setattr(build_module, "load_clip", load_and_count)
     resumed = build(mocap_dir=tmp_path / "mocap", cache_dir=tmp_path / "cache", fps_list=(30,), progress=False)
     assert loaded[0] != loaded[1] and len(loaded) == 2 and resumed.clips == 2  # the second clip only
     assert not list((tmp_path / "cache").glob("*.parts"))

@@ -45,9 +45,9 @@ the ground, at least `min_goal_distance` from the start.
 ## Floor
 
 With `ground_feet` (default) each new frame is moved vertically so that the body's lowest sole point (of the
-soles' convex hulls) touches the ground, as WandrReach's rule: the prior's height drifts (random latents bury a body or fly it
-metres up) and a walking body always has a foot down. The realism benchmarks also measure the prior
-without it (`ground_feet=False`).
+soles' convex hulls) touches the ground, as WandrReach's rule: the prior's height drifts (random latents bury a
+body or fly it metres up) and a walking body always has a foot down. The realism benchmarks also measure the
+prior without it (`ground_feet=False`).
 
 ## Episode End
 

@@ -265,7 +265,8 @@ class PoseVAE(nn.Module):
     def encode_sixd(self, sixd: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """`encode` of poses already as orthonormal 6-D rotations (..., 21, 6)."""
         hidden = self.encoder(sixd.flatten(-2))
-        return linear(hidden, self.mean.weight, self.mean.bias), linear(hidden, self.log_variance.weight, self.log_variance.bias)
+        mean = linear(hidden, self.mean.weight, self.mean.bias)
+        return mean, linear(hidden, self.log_variance.weight, self.log_variance.bias)
 
     def decode(self, z: torch.Tensor) -> torch.Tensor:
         """(..., latent) -> (..., 21, 3, 3) rotation matrices."""

@@ -15,6 +15,10 @@ ENV_SPECS: dict[str, tuple[str, str]] = {
         "motion_envs.envs.gamma_reach:GammaReachEnv",
         "motion_envs.envs.gamma_reach:GammaReachVectorEnv",
     ),
+    "motion_envs/GammaWander-v0": (
+        "motion_envs.envs.gamma_wander:GammaWanderEnv",
+        "motion_envs.envs.gamma_wander:GammaWanderVectorEnv",
+    ),
     "motion_envs/WandrReach-v0": (
         "motion_envs.envs.wandr_reach:WandrReachEnv",
         "motion_envs.envs.wandr_reach:WandrReachVectorEnv",

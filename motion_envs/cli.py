@@ -171,6 +171,35 @@ def _view(args: argparse.Namespace) -> int:
     return 0
 
 
+def _populate(args: argparse.Namespace) -> int:
+    import torch
+
+    from agents.controllers import PolicyLatent
+    from motion_envs.populate import populate, write_video
+    from motion_envs.priors.training import WEIGHTS_DIR
+    from motion_envs.wrappers.tree_search import SearchSettings
+
+    scene = _scene_argument(args.scene, args.scene_file)
+    if scene is None:
+        print("motion-envs populate: give a room (--scene living:1003) or a scene file (--scene-file)", file=sys.stderr)
+        return 2
+    proposal = PolicyLatent(args.policy or WEIGHTS_DIR / "ppo_gammareach_alpha1_paper.zip", seed=args.seed)
+    search = None if args.no_search else SearchSettings(roots=args.roots, children=4, keep=2, max_depth=args.horizon)
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    result = populate(scene, proposal, args.bodies, args.seconds, args.seed, search, scene_spec=args.scene or "")
+    print(f"{result.bodies} bodies, {result.motion_seconds:.1f} s of motion in {result.wall_seconds:.1f} s "
+          f"({result.realtime_factor:.2f}x real time): {result.arrivals} arrivals ({result.arrivals_per_minute:.1f}/min), "
+          f"collisions {100 * result.collided:.1f}% of body-primitives, overlapping another body {100 * result.overlapping:.1f}%")
+    if args.save_rollout:
+        result.rollout.save(args.save_rollout)
+        scene_hint = f" --scene {args.scene}" if args.scene else f" --scene-file {args.scene_file}"
+        print(f"rollout: {args.save_rollout} (motion-envs view {args.save_rollout}{'' if args.scene else scene_hint})")
+    if args.video:
+        print(f"video: {write_video(result, scene, args.video)}")
+    return 0
+
+
 def _scene_argument(spec: str | None, path: Path | None):
     """A scene from 'family:seed' or a file (None when neither is given)."""
     from motion_envs.scenes import load_scene, make_scene
@@ -440,7 +469,7 @@ def _subsets(args: argparse.Namespace) -> tuple[str, ...]:
 def parser() -> argparse.ArgumentParser:
     root = argparse.ArgumentParser(prog="motion-envs", description="Motion-prior Gymnasium environments.",
                                    epilog="--debug (anywhere): show the traceback of an error instead of one line")  # fmt: skip
-    commands = root.add_subparsers(dest="command", required=True, metavar="{data,train,bench,play,view}")
+    commands = root.add_subparsers(dest="command", required=True, metavar="{data,train,bench,play,populate,view}")
 
     data = commands.add_parser("data", help="build the motion cache from a mocap folder").add_subparsers(
         dest="action", required=True
@@ -611,6 +640,21 @@ def parser() -> argparse.ArgumentParser:
     play.add_argument("--env-option", action="append", default=[], metavar="KEY=VALUE",
                       help="a gym.make argument of the env, over what the policy was trained for (repeatable)")
     play.set_defaults(run=_play)
+
+    crowd = commands.add_parser("populate", help="fill a room with GAMMA bodies walking between random places")
+    crowd.add_argument("--scene", default=None, metavar="FAMILY:SEED", help="a procedural room, e.g. living:1003")
+    crowd.add_argument("--scene-file", type=Path, default=None, help="a scene file (any trimesh format) instead")
+    crowd.add_argument("--bodies", type=int, default=16)
+    crowd.add_argument("--seconds", type=float, default=30.0)
+    crowd.add_argument("--seed", type=int, default=0)
+    crowd.add_argument("--policy", type=Path, default=None, help="GammaReach PPO policy proposing latents (default: shipped alpha=1)")
+    crowd.add_argument("--no-search", action="store_true", help="play the policy's latents without tree search")
+    crowd.add_argument("--roots", type=int, default=8, help="search: latents tried per body and primitive")
+    crowd.add_argument("--horizon", type=int, default=2, help="search: primitives looked ahead")
+    crowd.add_argument("--threads", type=int, default=None, help="torch threads (default: torch's)")
+    crowd.add_argument("--video", type=Path, default=None, help="write an mp4 of the crowd")
+    crowd.add_argument("--save-rollout", type=Path, default=None, help="write every frame to an .npz for `motion-envs view`")
+    crowd.set_defaults(run=_populate)
 
     view = commands.add_parser("view", help="browser viewer (viser): replay a rollout file or run a policy live")
     view.add_argument("rollout", nargs="?", type=Path, default=None, help="an .npz from `motion-envs play --save-rollout`")

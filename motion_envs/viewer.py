@@ -2,7 +2,10 @@
 
 The bodies are mannequin-x's wooden mannequins (its viser integration:
 skinned meshes posed in the browser), the goals spheres or ground rings, the
-pelvis trails line segments, a scene's parts coloured by label. A timeline
+pelvis trails line segments, a scene's parts coloured by label. In a scene
+the walls and furniture are cut at `CUTAWAY_HEIGHT` (as the third-person
+renderer's) and the camera opens above the bodies, looking down on them;
+the "full walls" checkbox shows the uncut room. A timeline
 slider scrubs frames; "play" runs them at the rollout's frame rate, and a
 live source (an env with a controller) appends frames when the timeline
 reaches its end. The server binds to 127.0.0.1 unless told otherwise.
@@ -21,9 +24,11 @@ import torch
 from motion_envs.body.frames import MANNEQUIN_TO_WORLD
 from motion_envs.rollout import Rollout
 from motion_envs.scenes.labels import LABELS, PALETTE
-from motion_envs.scenes.scene import Scene
+from motion_envs.scenes.scene import FLOOR, Scene
 
 GOAL_COLOUR, TRAIL_COLOUR = (50, 180, 80), (230, 115, 25)
+CUTAWAY_HEIGHT = 1.2
+"""Walls and furniture are shown up to this height (m) unless "full walls" is ticked."""
 WORLD_ROTATION = roma.rotmat_to_rotvec(torch.tensor(MANNEQUIN_TO_WORLD)).numpy()
 """mannequin-x's global rotation that turns its Y-up body into the suite's Z-up world."""
 
@@ -42,6 +47,18 @@ def mannequin_pose(template: dict[str, np.ndarray], transl: np.ndarray, rotation
     pose["global_rotation"] = WORLD_ROTATION
     pose["global_translation"] = np.asarray(transl, dtype=np.float64) - pelvis_offset
     return pose
+
+
+def opening_camera(pelvis: np.ndarray, in_scene: bool) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """(position, look-at) of the first view of bodies with pelvis positions (B, 3): on open ground beside and above
+    them; in a scene from high above (over the cut walls), pulled back to frame a crowd's spread."""
+    centre = pelvis.mean(axis=0)
+    if not in_scene:
+        return tuple(centre + np.array([-3.5, -3.5, 2.5])), tuple(centre)
+    spread = float(np.ptp(pelvis[:, :2], axis=0).max()) if len(pelvis) > 1 else 0.0
+    scale = max(1.0, spread / 3.0)
+    look = np.array([centre[0], centre[1], 0.5])
+    return tuple(look + scale * np.array([-2.0, -2.0, 4.5])), tuple(look)
 
 
 class RolloutViewer:
@@ -70,16 +87,29 @@ class RolloutViewer:
         self.slider = gui.add_slider("frame", min=0, max=max(rollout.frames - 1, 1), step=1, initial_value=0)
         self.playing = gui.add_checkbox("play", initial_value=True)
         self.slider.on_update(lambda _: self.show(int(self.slider.value)))
-        start = rollout.transl[0].mean(axis=0)
-        self.server.initial_camera.position = tuple(start + np.array([-3.5, -3.5, 2.5]))
-        self.server.initial_camera.look_at = tuple(start)
+        self.server.initial_camera.position, self.server.initial_camera.look_at = opening_camera(rollout.transl[0], scene is not None)
         self._stop = threading.Event()
         self.show(0)
 
     def _add_scene(self, scene: Scene) -> None:
-        for label in np.unique(scene.face_labels):
-            faces = scene.faces[scene.face_labels == label]
-            self.server.scene.add_mesh_simple(f"/scene/{LABELS[label]}", scene.vertices, faces, color=tuple(int(c) for c in PALETTE[label]))
+        """The room twice: cut at `CUTAWAY_HEIGHT` (shown) and whole (shown with "full walls")."""
+        cut = Scene([part for part in scene.parts if part.label == FLOOR] + scene.cutaway(CUTAWAY_HEIGHT), scene.name)
+        handles = {"cut": [], "full": []}
+        for kind, shown in (("cut", cut), ("full", scene)):
+            for label in np.unique(shown.face_labels):
+                faces = shown.faces[shown.face_labels == label]
+                handles[kind].append(self.server.scene.add_mesh_simple(f"/scene_{kind}/{LABELS[label]}", shown.vertices, faces,
+                                                                       color=tuple(int(c) for c in PALETTE[label])))  # fmt: skip
+        full_walls = self.server.gui.add_checkbox("full walls", initial_value=False)
+
+        def show_walls(_: object = None) -> None:
+            for handle in handles["full"]:
+                handle.visible = full_walls.value
+            for handle in handles["cut"]:
+                handle.visible = not full_walls.value
+
+        full_walls.on_update(show_walls)
+        show_walls()
 
     def show(self, frame: int) -> None:
         """Pose every body, goal and trail at `frame`."""

@@ -235,10 +235,14 @@ class CoreVectorEnv(VectorEnv):
                 info["_final_obs"] = info["_final_info"] = done.numpy()
         if restarted.any():
             self._restart(restarted, observation)
+        self.record_trails(restarted)
+        return observation, reward, terminated, truncated, info
+
+    def record_trails(self, restarted: torch.Tensor) -> None:
+        """With a render mode, add the drawn bodies' pelvis to their trails; bodies `restarted` (N,) bool begin anew."""
         if self.render_mode is not None:
             for trail, pelvis, new in zip(self.trails, self._drawn_pelvis(), restarted.tolist()):
                 trail[:] = [pelvis] if new else [*trail, pelvis]
-        return observation, reward, terminated, truncated, info
 
     def _restart(self, rows: torch.Tensor, observation: Observation) -> None:
         """Start new episodes for the bodies where `rows` (N,) bool is true, writing their observations in place."""
@@ -257,7 +261,8 @@ class CoreVectorEnv(VectorEnv):
         if self._view is None or self._view_scene is not scene:
             self._view = EnvView(self.core.body, *self.core.goal_marker, max_bodies=self.render_bodies, scene=scene)
             self._view_scene = scene
-        return self._view.frame(self.core.render_inputs(self.state), [np.array(trail) for trail in self.trails])
+        paths = self.core.render_paths(self.state) if hasattr(self.core, "render_paths") else None  # cores with routes
+        return self._view.frame(self.core.render_inputs(self.state), [np.array(trail) for trail in self.trails], paths)
 
     def _drawn_pelvis(self) -> np.ndarray:
         """(min(N, render_bodies), 3) pelvis positions of the bodies a render draws."""

@@ -194,15 +194,18 @@ class GammaReachCore:
     def num_starts(self) -> int:
         return len(self.start_transl)
 
-    def initial_state(self, start_index: torch.Tensor, facing: torch.Tensor, goal_xy: torch.Tensor) -> GammaReachState:
-        """Bodies from start rows (N,) turned to `facing` (N,) radians about the pelvis, pelvis over (0, 0);
-        goals (N, 2) on the ground."""
+    def initial_state(self, start_index: torch.Tensor, facing: torch.Tensor, goal_xy: torch.Tensor,
+                      start_xy: torch.Tensor | None = None) -> GammaReachState:  # fmt: skip
+        """Bodies from start rows (N,) turned to `facing` (N,) radians about the pelvis, pelvis over `start_xy`
+        (N, 2) (default (0, 0)); goals (N, 2) on the ground."""
         start_index, facing, goal_xy = (value.to(self.device) for value in (start_index, facing, goal_xy))
         if (start_index < 0).any() or (start_index >= self.num_starts).any():
             raise ValueError(f"start_index must lie in [0, {self.num_starts}), got {start_index.tolist()}")
         turn = roma.rotvec_to_rotmat(torch.stack([torch.zeros_like(facing), torch.zeros_like(facing), facing], -1))
         orient = roma.rotmat_to_rotvec(turn @ roma.rotvec_to_rotmat(self.start_orient[start_index]))
         transl = self.start_transl[start_index] * torch.tensor([0.0, 0.0, 1.0], device=self.device)
+        if start_xy is not None:
+            transl[:, :2] = start_xy.to(self.device, torch.float32)
         seed = self.generator.seed_from_bodies(transl, orient, self.start_pose[start_index])
         count = len(start_index)
         goal = torch.cat([goal_xy.to(torch.float32), torch.zeros(count, 1, device=self.device)], dim=1)

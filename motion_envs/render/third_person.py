@@ -25,12 +25,12 @@ from motion_envs.body.skeleton import rest_body
 from motion_envs.render.camera import Camera, pinhole_rays
 from motion_envs.render.raycast import RayCaster
 from motion_envs.scenes.labels import PALETTE
-from motion_envs.scenes.scene import FLOOR, Scene
+from motion_envs.scenes.scene import Scene
 
 SKY_TOP, SKY_BOTTOM = np.array([0.55, 0.68, 0.85]), np.array([0.88, 0.91, 0.95])
 GROUND, GRID = np.array([0.82, 0.82, 0.80]), np.array([0.62, 0.62, 0.60])
 WOOD = np.array([0.80, 0.62, 0.42])
-GOAL, TRAIL = np.array([0.20, 0.70, 0.30]), np.array([0.90, 0.45, 0.10])
+GOAL, TRAIL, PATH = np.array([0.20, 0.70, 0.30]), np.array([0.90, 0.45, 0.10]), np.array([0.15, 0.45, 0.95])
 LIGHT = np.array([0.35, -0.45, 0.82]) / np.linalg.norm([0.35, -0.45, 0.82])
 
 
@@ -80,9 +80,10 @@ class ThirdPersonRenderer:
         return self.body.skin_with_rows(posed, self.rows if transl.ndim == 1 or len(transl) == 1 else self.crowd_rows).numpy()
 
     def render(self, vertices: np.ndarray, camera: Camera, goal: np.ndarray | None = None, goal_radius: float = 0.75,
-               trail: np.ndarray | list[np.ndarray] | None = None, goal_shape: str = "ring") -> np.ndarray:  # fmt: skip
+               trail: np.ndarray | list[np.ndarray] | None = None, goal_shape: str = "ring",
+               routes: list[np.ndarray] | None = None) -> np.ndarray:  # fmt: skip
         """One image. vertices: (B, V, 3) posed bodies from `vertices`; goal: (3,) or (G, 3); trail: (T, 3) or a
-        list of such paths.
+        list of such paths (pelvis trails, orange); routes: planned paths (W, 3) ahead of the bodies (blue).
 
         goal_shape "ring": a ring of `goal_radius` on the ground under each goal; "sphere": a floating sphere of
         `goal_radius` at each goal, with a ring of the same radius on the ground below it as a height cue."""
@@ -101,6 +102,8 @@ class ThirdPersonRenderer:
         for path in paths:
             if len(path) > 1:
                 _draw_trail(image, depth, camera, np.asarray(path))
+        for route in routes or []:
+            _draw_trail(image, depth, camera, np.asarray(route), PATH)
         return (np.clip(image, 0.0, 1.0) * 255).astype(np.uint8)
 
     def _background(self, directions: np.ndarray, camera: Camera, vertices: np.ndarray, goals: np.ndarray,
@@ -151,15 +154,9 @@ class _CutawayScene:
 shapes flatten at the cut; floors are drawn as the analytic ground), ready to cast."""
 
     def __init__(self, scene: Scene, height: float) -> None:
-        meshes, labels = [], []
-        for part in scene.parts:
-            if part.label == FLOOR:
-                continue
-            vertices = part.mesh.vertices.copy()
-            vertices[:, 2] = np.minimum(vertices[:, 2], height)  # a box stays a box, lower
-            meshes.append(trimesh.Trimesh(vertices, part.mesh.faces, process=False))
-            labels.append(np.full(len(part.mesh.faces), part.label))
-        combined = trimesh.util.concatenate(meshes)
+        parts = scene.cutaway(height)
+        labels = [np.full(len(part.mesh.faces), part.label) for part in parts]
+        combined = trimesh.util.concatenate([part.mesh for part in parts])
         self.caster = RayCaster(combined.vertices, combined.faces)
         self.normals = combined.face_normals.astype(np.float32)  # (F, 3)
         colours = (PALETTE.astype(np.float32) / 255.0)[np.concatenate(labels)]
@@ -302,8 +299,8 @@ def _draw_sphere(image: np.ndarray, depth: np.ndarray, camera: Camera, direction
         _paint(image, depth, window, hit, GOAL * (0.45 + 0.55 * np.clip(normals @ LIGHT, 0.0, None))[:, None], entry[hit])
 
 
-def _draw_trail(image: np.ndarray, depth: np.ndarray, camera: Camera, trail: np.ndarray) -> None:
-    """Pelvis trail on the ground as 2-px dots, densified along each segment, hidden where something is nearer."""
+def _draw_trail(image: np.ndarray, depth: np.ndarray, camera: Camera, trail: np.ndarray, colour: np.ndarray = TRAIL) -> None:
+    """A path (T, 3) on the ground as 2-px dots, densified along each segment, hidden where something is nearer."""
     ground = np.asarray(trail, dtype=np.float64).copy()
     ground[:, 2] = 0.0
     steps = np.linspace(0.0, 1.0, 6)[:-1]
@@ -317,4 +314,4 @@ def _draw_trail(image: np.ndarray, depth: np.ndarray, camera: Camera, trail: np.
             keep = (r >= 0) & (r < image.shape[0]) & (c >= 0) & (c < image.shape[1])
             r, c = r[keep], c[keep]
             visible = distance[keep] <= depth[r, c] * 1.02 + 0.05
-            image[r[visible], c[visible]] = TRAIL
+            image[r[visible], c[visible]] = colour

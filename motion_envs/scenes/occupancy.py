@@ -44,11 +44,15 @@ class OccupancyGrid:
         values = grid[clamped[..., 0], clamped[..., 1], clamped[..., 2]].to(points.dtype)
         return torch.where(inside, values, torch.full_like(values, float("inf")))
 
-    def free_map(self, clearance: float, low: float = 0.1, high: float = 1.7) -> np.ndarray:
-        """(X, Y) bool: columns where every voxel between `low` and `high` m is at least `clearance` from a solid."""
+    def column_clearance(self, low: float = 0.1, high: float = 1.7) -> np.ndarray:
+        """(X, Y) float32: per column, the least signed distance (m) of its voxels between `low` and `high` m up."""
         z = self.centres(2)
         band = (z >= low) & (z <= high)
-        return self.signed_distance[:, :, band].min(axis=2) >= clearance
+        return self.signed_distance[:, :, band].min(axis=2)
+
+    def free_map(self, clearance: float, low: float = 0.1, high: float = 1.7) -> np.ndarray:
+        """(X, Y) bool: columns where every voxel between `low` and `high` m is at least `clearance` from a solid."""
+        return self.column_clearance(low, high) >= clearance
 
 
 def build_occupancy(solids: list[trimesh.Trimesh], pitch: float = 0.05, height: float = 2.0,

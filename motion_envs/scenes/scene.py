@@ -91,6 +91,17 @@ class Scene:
         best = int(far[0]) if len(far) else int(np.argmax(distances))
         return starts[best], goals[best]
 
+    def cutaway(self, height: float) -> list[ScenePart]:
+        """The solid (non-floor) parts with every vertex lowered to at most `height` m (boxes stay boxes, lower;
+        other shapes flatten at the cut): walls that hide nothing inside, for views from above the room."""
+        parts = []
+        for part in self.parts:
+            if part.label != FLOOR:
+                vertices = part.mesh.vertices.copy()
+                vertices[:, 2] = np.minimum(vertices[:, 2], height)
+                parts.append(ScenePart(trimesh.Trimesh(vertices, part.mesh.faces, process=False), part.label))
+        return parts
+
     def collisions(self, points: torch.Tensor, radii: torch.Tensor) -> torch.Tensor:
         """Penetration (..., P) in metres (0 where clear) of spheres at `points` (..., P, 3) with `radii` (P,)."""
         return (radii - self.grid.query(points)).clamp(min=0.0)

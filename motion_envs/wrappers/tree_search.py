@@ -14,6 +14,11 @@ Node cost (lower is better; the release's soft-contact cost, weights in
 
     w_ground · max(|min z of any marker| − 0.05, 0) + w_skate · max(slowest marker speed − 0.075, 0)
     + w_orientation · (1 − cos(facing, direction to goal)) + w_distance · (pelvis-goal distance)
+    + w_collision · [a body sphere entered the scene] + w_crowd · (metres inside another body's space)
+
+The last two terms need results that report them (`GammaWander-v0`'s `collided` and `crowding`); the
+collision weight is large, so a branch that walks into furniture or a wall is pruned unless every branch
+does (ours; the release's scene search has the same rule as a hard check).
 
 ## What an environment must offer (the batched clone/restore API)
 
@@ -26,7 +31,9 @@ Node cost (lower is better; the release's soft-contact cost, weights in
   `primitive.markers` (N, T, M, 3) and `primitive.joints` (N, T, 22, 3) in
   world coordinates (z up);
 - `core.config.max_primitives` for the default depth and
-  `core.generator.latent_size`.
+  `core.generator.latent_size`;
+- optionally, results with `collided` (N,) bool and `crowding` (N,) metres, and states with `collisions` (N,)
+  so far (`SearchCost`'s scene terms).
 
 `GammaReachCore` offers all of it; `TreeSearch` wraps a single env whose
 `unwrapped` has `core` and a settable `state` (e.g. `GammaReach-v0`).
@@ -62,6 +69,10 @@ class SearchCost:
     skate_tolerance: float = 0.075
     """m/s the slowest marker may move for free (forward difference)."""
     fps: int = 40
+    collision: float = 1000.0
+    """Added per collision of a node's branch with the scene (results with `collided`): such branches are pruned."""
+    crowd: float = 10.0
+    """Per metre a pelvis came inside another body's personal space (results with `crowding`)."""
 
     @classmethod
     def distance_only(cls) -> SearchCost:
@@ -77,9 +88,13 @@ class SearchCost:
         lowest = markers[..., 2].amin(dim=(1, 2)).abs()
         slowest = marker_speeds(markers, self.fps).amin(dim=(1, 2))
         misaligned = 2.0 * (1.0 - orientation_reward(result.primitive.joints[:, -1], state.goal))  # 1 - cos
-        return (self.ground * (lowest - self.ground_tolerance).clamp_min(0.0)
+        cost = (self.ground * (lowest - self.ground_tolerance).clamp_min(0.0)
                 + self.skate * (slowest - self.skate_tolerance).clamp_min(0.0)
                 + self.orientation * misaligned + self.distance * result.distance)  # fmt: skip
+        if hasattr(result, "collided"):  # with the branch's earlier collisions (`state.collisions`): pruned for good
+            collisions = state.collisions.to(cost.dtype) + result.collided.to(cost.dtype)
+            cost = cost + self.collision * collisions + self.crowd * result.crowding
+        return cost
 
 
 @dataclass(frozen=True)

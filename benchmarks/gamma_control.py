@@ -115,11 +115,12 @@ def summarise(parts: list[dict]) -> dict:
 
 
 @torch.no_grad()
-def run_clones(core: GammaReachCore, start: GammaReachState, controller: Controller, clones: int) -> dict:
+def run_clones(core: GammaReachCore, start: GammaReachState, controller: Controller, clones: int,
+               recorder_type: type[Recorder] = Recorder) -> dict:  # fmt: skip
     """The paper's protocol: `clones` copies of every pair move together until one reaches the goal."""
     pairs, horizon = start.num_bodies, core.config.max_primitives
     state = start.repeat(clones)  # clones of a pair are adjacent rows
-    recorder = Recorder(core, start, horizon)
+    recorder = recorder_type(core, start, horizon)
     steps, reached, distance = torch.zeros(pairs, dtype=torch.long), torch.zeros(pairs, dtype=torch.bool), torch.zeros(pairs)
     live = torch.arange(pairs)
     for step in tqdm(range(horizon), desc="primitives", leave=False):
@@ -138,10 +139,11 @@ def run_clones(core: GammaReachCore, start: GammaReachState, controller: Control
 
 
 @torch.no_grad()
-def run_search(core: GammaReachCore, start: GammaReachState, proposal: Controller, settings: SearchSettings) -> dict:
+def run_search(core: GammaReachCore, start: GammaReachState, proposal: Controller, settings: SearchSettings,
+               recorder_type: type[Recorder] = Recorder) -> dict:  # fmt: skip
     """One tree search per pair; the chosen branches replayed for contact score, FS and paths."""
     found = beam_search(core, start, proposal, settings)
-    recorder = Recorder(core, start, core.config.max_primitives)
+    recorder = recorder_type(core, start, core.config.max_primitives)
     state, live = start, torch.arange(start.num_bodies)
     for level in range(found.latents.shape[1]):
         state, result = core.step(state, found.latents[live, level])

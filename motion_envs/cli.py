@@ -70,6 +70,12 @@ def _add_ray_arg(parser: argparse.ArgumentParser) -> None:
                              "at ADDRESS (auto, host:6379, ray://host:10001); same table as without")  # fmt: skip
 
 
+def _bench_wander(args: argparse.Namespace) -> int:
+    from benchmarks.gamma_wander import main as gamma_wander
+
+    return gamma_wander(paths=args.paths, rooms=args.rooms, seed=args.seed, quick=args.quick)
+
+
 def _bench_wandr(args: argparse.Namespace) -> int:
     from benchmarks.wandr_grid import main as wandr_grid
 
@@ -580,6 +586,12 @@ def parser() -> argparse.ArgumentParser:
                              help="rerun only the grid rows whose label contains this text (e.g. 'PPO') and rewrite them in the existing table")
     _add_ray_arg(bench_wandr)
     bench_wandr.set_defaults(run=_bench_wandr)
+    bench_wander = bench.add_parser("wander", help="GAMMA bodies following waypoints: open-ground paths, rooms, a crowd")
+    bench_wander.add_argument("--paths", type=int, default=100, help="open-ground waypoint paths")
+    bench_wander.add_argument("--rooms", type=int, default=100, help="held-out rooms per layout family (max 100)")
+    bench_wander.add_argument("--seed", type=int, default=0)
+    bench_wander.add_argument("--quick", action="store_true", help="20 paths x 8 clones, 10 rooms per family, a 10-s crowd")
+    bench_wander.set_defaults(run=_bench_wander)
     bench_pace = bench.add_parser("wandr-pace", help="does WANDR's prior keep the intention's pace on its own training windows?")
     bench_pace.add_argument("--weights", type=Path, nargs="+", default=None, help="WANDR priors (default: the shipped one)")
     bench_pace.set_defaults(run=_bench_wandr_pace)

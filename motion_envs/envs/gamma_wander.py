@@ -73,7 +73,7 @@ from motion_envs.envs.core import CoreVectorEnv, check_actions, config_from_kwar
 from motion_envs.envs.gamma_reach import OBSERVATION_SIZE, GammaReachConfig, GammaReachCore, GammaReachState
 from motion_envs.envs.options import check_known, index, number, point, real_array
 from motion_envs.precision import PRECISIONS
-from motion_envs.priors.gamma_generator import GammaGenerator, Primitive
+from motion_envs.priors.gamma_generator import GammaGenerator, GammaSeed, Primitive
 from motion_envs.render.env_view import RenderInputs
 from motion_envs.rewards import RewardConfig
 from motion_envs.scenes.layouts import FAMILIES, TEST_SEEDS, TRAIN_SEEDS, make_scene
@@ -180,6 +180,11 @@ class GammaWanderState(BatchedState):
     @property
     def steps(self) -> torch.Tensor:
         return self.reach.steps
+
+    @property
+    def seed(self) -> GammaSeed:
+        """The GAMMA seed (the last frames so far), as a GammaReach state has it."""
+        return self.reach.seed
 
     @property
     def pelvis(self) -> torch.Tensor:

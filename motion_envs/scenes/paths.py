@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pyastar2d
+import skfmm
 from scipy import ndimage
 
 from motion_envs.scenes.scene import Scene
@@ -129,3 +130,32 @@ def nearest_walkable(scene: Scene, points: np.ndarray) -> np.ndarray:
     cells = np.clip(cells, 0, np.array(scene.walkable.shape) - 1)
     nearest = np.stack([rows[cells[:, 0], cells[:, 1]], columns[cells[:, 0], cells[:, 1]]], axis=-1)
     return grid.origin[:2] + (nearest + 0.5) * grid.pitch
+
+
+def geodesic_distance(scene: Scene, source: np.ndarray) -> np.ndarray:
+    """(X, Y) walking distance (m) over the walkable region from the cell of `source` (2,) (fast marching,
+    scikit-fmm); inf off the region."""
+    grid = scene.grid
+    cell = _walkable_cell(scene, source, "source")
+    phi = np.ones(scene.walkable.shape)
+    phi[cell[0], cell[1]] = -1.0
+    distance = skfmm.distance(np.ma.MaskedArray(phi, ~scene.walkable), dx=grid.pitch)
+    return np.ma.filled(np.abs(distance).astype(np.float64), np.inf)
+
+
+def far_ends(scene: Scene, rng: np.random.Generator, clearance: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
+    """A start and a goal (2,) at the far ends of the walkable region: the place farthest (walking) from a random
+    one, and the place farthest from that (a double sweep of `geodesic_distance`). Both keep `clearance` m from
+    every solid where the region has such places: a body's swinging hands reach ~0.4 m from its pelvis, and a start
+    wedged into a corner (0.25 m from two walls) collides while the body turns."""
+    grid = scene.grid
+    roomy = scene.walkable & (grid.column_clearance() >= clearance)
+    candidates = roomy if roomy.any() else scene.walkable
+
+    def farthest(source: np.ndarray) -> np.ndarray:
+        distance = geodesic_distance(scene, source)
+        cell = np.unravel_index(np.argmax(np.where(np.isfinite(distance) & candidates, distance, -1.0)), distance.shape)
+        return grid.origin[:2] + (np.array(cell) + 0.5) * grid.pitch
+
+    start = farthest(scene.sample_free(rng, 1)[0])
+    return start, farthest(start)

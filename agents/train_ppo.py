@@ -39,7 +39,7 @@ from motion_envs.data.goal_windows import GoalWindows  # noqa: E402
 from motion_envs.priors.training import announce_replacement, record_in_manifest, weights_destination  # noqa: E402
 
 
-DEFAULT_REWARDS = {"motion_envs/GammaReach-v0": "paper", "motion_envs/WandrReach-v0": "default"}
+DEFAULT_REWARDS = {"motion_envs/GammaReach-v0": "paper", "motion_envs/GammaWander-v0": "paper", "motion_envs/WandrReach-v0": "default"}
 """Each latent-action env's default reward spec (`train ppo` without `--reward`)."""
 ENGINES = ("sb3", "rllib")
 RLLIB_ONLY_ENVS = ("motion_envs/ClopsNav-v0",)

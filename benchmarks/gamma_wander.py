@@ -43,6 +43,7 @@ from motion_envs.wrappers.tree_search import SearchCost, SearchSettings
 RESULTS = Path(__file__).resolve().parent / "results"
 PRIMITIVE_SECONDS = 0.25
 POLICY = WEIGHTS_DIR / "ppo_gammareach_alpha1_paper.zip"
+WANDER_POLICY = WEIGHTS_DIR / "ppo_gammawander_alpha1_paper.zip"
 COSTS = {"distance": SearchCost.distance_only(), "release": SearchCost()}
 
 
@@ -78,10 +79,17 @@ def figures(row: dict, seconds: float) -> dict:
     }
 
 
-def run_row(core: GammaWanderCore, start: GammaWanderState, row: str, seed: int, clones: int = 1) -> dict:
-    """One row on the bodies of `start`: "policy", "random z" (+ " & top1 <cost>" for a tree search)."""
+def policy_label(path: Path) -> str:
+    """ppo_gammareach_alpha1_paper.zip -> "policy(1)"; ppo_gammawander_alpha1_paper.zip -> "wander policy(1)"."""
+    env, _, rest = path.stem.removeprefix("ppo_").partition("_alpha")
+    return ("wander " if env == "gammawander" else "") + f"policy({rest.split('_')[0]})"
+
+
+def run_row(core: GammaWanderCore, start: GammaWanderState, row: str, seed: int, clones: int = 1,
+            policy: Path = POLICY) -> dict:  # fmt: skip
+    """One row on the bodies of `start`: "policy" (the `policy` file), "random z" (+ " & topK <cost>": a search)."""
     began = time.perf_counter()
-    proposal = RandomLatent(seed) if row.startswith("random") else PolicyLatent(POLICY, seed=seed)
+    proposal = RandomLatent(seed) if row.startswith("random") else PolicyLatent(policy, seed=seed)
     if "top" not in row:
         recorded = run_clones(core, start, proposal, clones, WanderRecorder)
     else:
@@ -119,18 +127,24 @@ def table(rows: dict[str, dict], columns: tuple[str, ...]) -> list[str]:
 
 
 def main(paths: int = 100, clones: int = 32, repeats: int = 4, rooms: int = 100, crowd_seconds: float = 30.0,
-         seed: int = 0, quick: bool = False) -> int:  # fmt: skip
+         seed: int = 0, quick: bool = False, policies: list[Path] | None = None, output: str | None = None) -> int:  # fmt: skip
+    """`policies`: GammaReach/GammaWander PPO files to compare (default: the shipped wander policy where there is
+    one, and GammaReach's α = 1 policy); the first one also drives the search rows and the crowd."""
     if quick:
         paths, clones, repeats, rooms, crowd_seconds = 20, 8, 2, 10, 10.0
+    given, policies = policies, policies or [path for path in (WANDER_POLICY, POLICY) if path.exists()]
+    labels = {policy_label(path): path for path in policies}
+    main_label, main_policy = next(iter(labels.items()))
     began = time.perf_counter()
     flat_core = GammaWanderCore(GammaWanderConfig(scene="flat", max_primitives=160))
     start = flat_paths(flat_core, paths, seed)
     flat: dict[str, dict] = {}
-    for name, body_clones in ((f"policy(1), any of {clones} clones", clones), ("policy(1), one body", 1)):
-        bodies = start if body_clones > 1 else start.repeat(repeats)
-        flat[name] = run_row(flat_core, bodies, "policy", seed, body_clones)
-    for row in ("policy(1) & top1 distance", "policy(1) & top1 release", "random z & top4 distance"):
-        flat[row] = run_row(flat_core, start, row, seed)
+    for label, policy in labels.items():
+        for name, body_clones in ((f"{label}, any of {clones} clones", clones), (f"{label}, one body", 1)):
+            bodies = start if body_clones > 1 else start.repeat(repeats)
+            flat[name] = run_row(flat_core, bodies, "policy", seed, body_clones, policy)
+    for row in (f"{main_label} & top1 distance", f"{main_label} & top1 release", "random z & top4 distance"):
+        flat[row] = run_row(flat_core, start, row, seed, policy=main_policy)
     flat_columns = ("success", "time", "left", "contact", "FS", "seconds")
 
     room_cores = {family: GammaWanderCore(GammaWanderConfig(scene=family, max_primitives=160), flat_core.generator)
@@ -138,37 +152,39 @@ def main(paths: int = 100, clones: int = 32, repeats: int = 4, rooms: int = 100,
     rooms_rows: dict[str, dict[str, dict]] = {}
     for family, room_core in tqdm(room_cores.items(), desc="room families"):
         planned, straight = room_starts(room_core, rooms, seed, False), room_starts(room_core, rooms, seed, True)
-        rooms_rows[family] = {
-            "policy(1), planned path": run_row(room_core, planned, "policy", seed),
-            "policy(1), straight at the goal": run_row(room_core, straight, "policy", seed),
-            "policy(1) & top1 distance, planned path": run_row(room_core, planned, "policy & top1 distance", seed),
-        }
+        rooms_rows[family] = {}
+        for label, policy in labels.items():
+            rooms_rows[family][f"{label}, planned path"] = run_row(room_core, planned, "policy", seed, policy=policy)
+            rooms_rows[family][f"{label}, straight at the goal"] = run_row(room_core, straight, "policy", seed, policy=policy)
+        rooms_rows[family][f"{main_label} & top1 distance, planned path"] = run_row(
+            room_core, planned, "policy & top1 distance", seed, policy=main_policy)
     room_columns = ("success", "time", "left", "collisions", "collisions per s", "FS", "seconds")
 
-    crowd = populate(make_scene("living", 1003), PolicyLatent(POLICY, seed=seed), 16, crowd_seconds, seed,
+    crowd = populate(make_scene("living", 1003), PolicyLatent(main_policy, seed=seed), 16, crowd_seconds, seed,
                      scene_spec="living:1003", core=room_cores["living"], progress=False)  # fmt: skip
-    stem = "gamma_wander" + ("_quick" if quick else "")
+    stem = output or "gamma_wander" + ("_quick" if quick else "")
     lines = [f"# Wandering: waypoints, rooms and crowds ({'quick' if quick else 'full'})", "", __doc__.split("\n\n", 1)[1].strip(), "",
              f"## 1. Waypoint paths on open ground ({paths} paths; one-body rows: {repeats} bodies per path)", "",
              *table(flat, flat_columns), "", f"## 2. Rooms ({rooms} held-out rooms per family, one body each)", ""]  # fmt: skip
     for family, rows in rooms_rows.items():
         lines += [f"**{family}**", "", *table(rows, room_columns), ""]
-    lines += ["## 3. Crowd", "", "| bodies | seconds of motion | arrivals / min | collided primitives | overlapping another body "
+    lines += [f"## 3. Crowd ({main_label}, search: 8 roots, 4 children, 2 kept, 2 primitives ahead)", "", "| bodies | seconds of motion | arrivals / min | collided primitives | overlapping another body "
               "| wall s | × real time |", "|---|---|---|---|---|---|---|",
               f"| {crowd.bodies} | {crowd.motion_seconds:.0f} | {crowd.arrivals_per_minute:.1f} | {crowd.collided:.3f} | "
               f"{crowd.overlapping:.3f} | {crowd.wall_seconds:.0f} | {crowd.realtime_factor:.2f} |", "",
-              machine_line(), f"Command: `motion-envs bench wander{' --quick' if quick else ''}`; "
+              machine_line(), f"Command: `motion-envs bench wander{' --quick' if quick else ''}"
+              f"{' --policies ' + ' '.join(str(p) for p in given) if given else ''}{' --output ' + output if output else ''}`; "
               f"{time.perf_counter() - began:.0f} s in all.", "", f"![paths]({stem}.png)", ""]  # fmt: skip
     text = "\n".join(lines)
     print(text)
     RESULTS.mkdir(parents=True, exist_ok=True)
     atomic_write(RESULTS / f"{stem}.md", lambda file: file.write(text.encode()))
-    _figure(flat, start, rooms_rows, room_cores, seed, rooms, RESULTS / f"{stem}.png")
+    _figure(flat, start, rooms_rows, room_cores, seed, rooms, main_label, RESULTS / f"{stem}.png")
     return 0
 
 
 def _figure(flat: dict, start: GammaWanderState, rooms_rows: dict, room_cores: dict[str, GammaWanderCore], seed: int,
-            rooms: int, path: Path) -> None:  # fmt: skip
+            rooms: int, label: str, path: Path) -> None:  # fmt: skip
     """Top-down: the first open-ground paths (waypoints as crosses) and one room per family with its body's path."""
     figure, axes = grid_of_axes(1 + len(rooms_rows), columns=3, size=4.5)
     count = min(8, start.num_bodies)
@@ -178,7 +194,7 @@ def _figure(flat: dict, start: GammaWanderState, rooms_rows: dict, room_cores: d
     for axis, (family, rows) in zip(axes[1:], rooms_rows.items()):
         state = room_starts(room_cores[family], 1, seed, False)
         scene = room_cores[family].scenes[int(state.scene[0])]
-        planned = rows["policy(1), planned path"]
+        planned = rows[f"{label}, planned path"]
         top_down(axis, planned["paths"][:1], state.waypoints[0, : int(state.count[0])].numpy(), scene,
                  title=f"{family}: {planned['success']:.2f} of {rooms}")  # fmt: skip
     save(figure, path, dpi=80)

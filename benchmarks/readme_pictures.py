@@ -10,6 +10,9 @@ inset -> `docs/clops_nav.png`.
 Scenes: the first held-out room of each layout family seen from above with a
 body and its goal, and under it what the body's head camera sees (semantic
 colours, depth, goal mask at 64 × 64, shown 2×) -> `docs/scenes.png`.
+GammaWander-v0: `motion-envs populate`'s crowd, 16 bodies in `living:1003` with
+the shipped GammaWander policy and tree search, after 2 s and after 12 s ->
+`docs/crowd.png`.
 """
 
 from __future__ import annotations
@@ -36,6 +39,7 @@ DOCS = Path(__file__).resolve().parent.parent / "docs"
 POLICY = WEIGHTS_DIR / "ppo_gammareach_alpha1_paper.zip"
 WANDR_POLICY = WEIGHTS_DIR / "ppo_wandrreach_alpha1_default.zip"
 CLOPS_POLICY = WEIGHTS_DIR / "dqn_clopsnav_open_memory.zip"
+WANDER_POLICY = WEIGHTS_DIR / "ppo_gammawander_alpha1_paper.zip"
 
 
 def episode_strip(env_id: str, destination: Path, seed: int, crop: tuple[int, int] = (40, 40), **play_kwargs) -> Path:
@@ -96,8 +100,21 @@ def scenes_picture(destination: Path = DOCS / "scenes.png") -> Path:
     return atomic_write(destination, lambda file: iio.imwrite(file, picture, extension=".png"))
 
 
+def crowd_picture(destination: Path = DOCS / "crowd.png", seconds: float = 12.0) -> Path:
+    from agents.controllers import PolicyLatent
+    from motion_envs.populate import CrowdView, populate
+
+    scene = make_scene("living", 1003)
+    policy = WANDER_POLICY if WANDER_POLICY.exists() else POLICY
+    result = populate(scene, PolicyLatent(policy, seed=0), bodies=16, seconds=seconds, seed=0, progress=False)
+    view = CrowdView(scene)
+    picture = np.concatenate([view.frame(result.rollout, index) for index in (2 * 32, result.rollout.frames - 1)], axis=1)
+    return atomic_write(destination, lambda file: iio.imwrite(file, picture, extension=".png"))
+
+
 if __name__ == "__main__":
     print(gamma_reach_strip())
     print(wandr_reach_strip())
     print(clops_nav_strip())
     print(scenes_picture())
+    print(crowd_picture())

@@ -73,7 +73,8 @@ def _add_ray_arg(parser: argparse.ArgumentParser) -> None:
 def _bench_wander(args: argparse.Namespace) -> int:
     from benchmarks.gamma_wander import main as gamma_wander
 
-    return gamma_wander(paths=args.paths, rooms=args.rooms, seed=args.seed, quick=args.quick)
+    return gamma_wander(paths=args.paths, rooms=args.rooms, seed=args.seed, quick=args.quick, policies=args.policies,
+                        output=args.output)  # fmt: skip
 
 
 def _bench_wandr(args: argparse.Namespace) -> int:
@@ -591,6 +592,9 @@ def parser() -> argparse.ArgumentParser:
     bench_wander.add_argument("--rooms", type=int, default=100, help="held-out rooms per layout family (max 100)")
     bench_wander.add_argument("--seed", type=int, default=0)
     bench_wander.add_argument("--quick", action="store_true", help="20 paths x 8 clones, 10 rooms per family, a 10-s crowd")
+    bench_wander.add_argument("--policies", type=Path, nargs="+", default=None,
+                              help="PPO policies to compare (default: the shipped GammaWander policy, if any, and GammaReach's alpha=1)")
+    bench_wander.add_argument("--output", default=None, help="results file stem (default gamma_wander[_quick])")
     bench_wander.set_defaults(run=_bench_wander)
     bench_pace = bench.add_parser("wandr-pace", help="does WANDR's prior keep the intention's pace on its own training windows?")
     bench_pace.add_argument("--weights", type=Path, nargs="+", default=None, help="WANDR priors (default: the shipped one)")

@@ -110,24 +110,36 @@ def populate(scene: Scene, proposal: Proposal, bodies: int = 16, seconds: float 
     return CrowdResult(recorder.rollout(), arrivals, collided / (steps * bodies), overlapping / (steps * bodies), wall, steps, bodies)
 
 
+class CrowdView:
+    """Frames of a crowd rollout in its room (walls cut away) from a fixed camera that frames the whole room."""
+
+    def __init__(self, scene: Scene, width: int = 640, height: int = 480) -> None:
+        from motion_envs.render.camera import follow_camera
+        from motion_envs.render.third_person import ThirdPersonRenderer
+
+        self.renderer = ThirdPersonRenderer(width=width, height=height, scene=scene)
+        x0, y0, x1, y1 = scene.walkable_bounds
+        size = max(x1 - x0, y1 - y0)
+        self.camera = follow_camera(np.array([(x0 + x1) / 2, (y0 + y1) / 2, 0.0]), width, height, distance=0.9 * size,
+                                    height_above=0.8 * size)  # fmt: skip
+
+    def frame(self, rollout: Rollout, index: int) -> np.ndarray:
+        """(H, W, 3) uint8: every body at frame `index`, with its current goal."""
+        rotations = torch.as_tensor(rollout.rotations[index])
+        vertices = self.renderer.vertices(torch.as_tensor(rollout.transl[index]), rotations[:, 0], rotations[:, 1:])
+        return self.renderer.render(vertices, self.camera, goal=rollout.goal[index], goal_radius=0.3)
+
+
 def write_video(result: CrowdResult, scene: Scene, path: str | Path, every: int = 2, width: int = 640, height: int = 480) -> Path:
-    """An mp4 of the crowd (every `every`-th frame) from a camera that frames the room, walls cut away."""
+    """An mp4 of the crowd (every `every`-th frame; `CrowdView`)."""
     import imageio.v2 as imageio
 
     from motion_envs.atomic import atomic_path
-    from motion_envs.render.camera import follow_camera
-    from motion_envs.render.third_person import ThirdPersonRenderer
 
-    rollout = result.rollout
-    renderer = ThirdPersonRenderer(width=width, height=height, scene=scene)
-    x0, y0, x1, y1 = scene.walkable_bounds
-    centre = np.array([(x0 + x1) / 2, (y0 + y1) / 2, 0.0])
-    camera = follow_camera(centre, width, height, distance=0.9 * max(x1 - x0, y1 - y0), height_above=0.8 * max(x1 - x0, y1 - y0))
-    rotations = torch.as_tensor(rollout.rotations)
+    view, rollout = CrowdView(scene, width, height), result.rollout
     with atomic_path(path) as partial, imageio.get_writer(str(partial), fps=rollout.fps / every, macro_block_size=8) as writer:
-        for frame in tqdm(range(0, rollout.frames, every), desc="video", unit="frame"):
-            vertices = renderer.vertices(torch.as_tensor(rollout.transl[frame]), rotations[frame, :, 0], rotations[frame, :, 1:])
-            writer.append_data(renderer.render(vertices, camera, goal=rollout.goal[frame], goal_radius=0.3))
+        for index in tqdm(range(0, rollout.frames, every), desc="video", unit="frame"):
+            writer.append_data(view.frame(rollout, index))
     return Path(path)
 
 

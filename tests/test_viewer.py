@@ -57,22 +57,21 @@ def _free_port() -> int:
         return probe.getsockname()[1]
 
 
-def test_browser_viewer_replays_a_rollout_with_the_body_on_the_canvas(tmp_path):
+def _chromium() -> str:
     chromium = shutil.which("chromium") or shutil.which("chromium-browser")
     if chromium is None:
         message = "headless Chromium not found (Debian package `chromium`; .ci/run installs it)"
         if os.environ.get("CI", "").lower() == "true":
             pytest.fail(message)
         pytest.skip(message)
+    return chromium
+
+
+def _wood_pixels_on_screen(viewer, path) -> int:
+    """Play `viewer` while headless Chromium opens its page; the screenshot's count of mannequin-wood pixels."""
     from playwright.sync_api import sync_playwright
 
-    from motion_envs.play import play
-    from motion_envs.viewer import RolloutViewer
-
-    path = tmp_path / "episode.npz"
-    play("motion_envs/WandrReach-v0", seed=3, save_rollout=path, max_frames=45)
-    rollout = Rollout.load(path)
-    viewer = RolloutViewer(rollout, port=_free_port())
+    chromium = _chromium()
     port = viewer.server.get_port()
     player = threading.Thread(target=viewer.run, kwargs={"duration": 30.0}, daemon=True)
     player.start()
@@ -83,16 +82,45 @@ def test_browser_viewer_replays_a_rollout_with_the_body_on_the_canvas(tmp_path):
             page.goto(f"http://127.0.0.1:{port}")
             page.wait_for_selector("canvas", timeout=60_000)
             page.wait_for_timeout(5_000)
-            page.screenshot(path=str(tmp_path / "viewer.png"))
+            page.screenshot(path=str(path))
             browser.close()
         assert int(viewer.slider.value) > 0  # the timeline played
     finally:
         viewer.stop()
         player.join(timeout=5)
-    pixels = iio.imread(tmp_path / "viewer.png")[..., :3].reshape(-1, 3).astype(int)
+    pixels = iio.imread(path)[140:420, :, :3].reshape(-1, 3).astype(int)  # between viser's panels (its banner is orange) and axes
     assert pixels.std(axis=0).mean() > 5  # not a blank canvas
     wood = (pixels[:, 0] > pixels[:, 2] + 60) & (pixels[:, 0] > pixels[:, 1] + 20)  # mannequin-x's wood palette
-    assert wood.sum() > 200
+    return int(wood.sum())
+
+
+def test_browser_viewer_replays_a_rollout_with_the_body_on_the_canvas(tmp_path):
+    _chromium()
+    from motion_envs.play import play
+    from motion_envs.viewer import RolloutViewer
+
+    path = tmp_path / "episode.npz"
+    play("motion_envs/WandrReach-v0", seed=3, save_rollout=path, max_frames=45)
+    viewer = RolloutViewer(Rollout.load(path), port=_free_port())
+    assert _wood_pixels_on_screen(viewer, tmp_path / "viewer.png") > 200
+
+
+def test_browser_viewer_opens_on_a_body_in_its_room_over_cut_walls(tmp_path):
+    """A body near the room's corner towards the old opening camera (3.5 m out along -x, -y) was hidden behind
+    2.5 m walls. An `open` room has no wood-coloured furniture, so wood on screen is the body."""
+    _chromium()
+    from motion_envs.envs.gamma_wander import GammaWanderEnv
+    from motion_envs.viewer import RolloutViewer
+
+    env = GammaWanderEnv(scene="open", scene_seeds=(1000,))
+    env.reset(seed=0, options={"start": [0.8, 0.8], "goal": [3.0, 3.0]})
+    recorder = RolloutRecorder(2.0, *env.core.goal_marker, env_id="motion_envs/GammaWander-v0", scene="open:1000")
+    for _ in range(60):  # 30 s at 2 frames/s: the timeline does not wrap back to 0 before the screenshot
+        inputs = env.core.render_inputs(env.state)
+        recorder.add(inputs.transl, inputs.global_orient, inputs.body_pose, inputs.goal)
+        env.step(np.zeros(128, dtype=np.float32))
+    viewer = RolloutViewer(recorder.rollout(), env.core.scenes[0], port=_free_port())
+    assert _wood_pixels_on_screen(viewer, tmp_path / "room.png") > 200
 
 
 def test_a_viewer_on_a_busy_port_reports_the_port_it_bound(tmp_path):

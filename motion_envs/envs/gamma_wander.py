@@ -30,7 +30,9 @@ env unchanged: it sees the current waypoint as its goal, the paper's way.
 GammaReach's terms (`motion_envs.rewards`, weights from `reward`) towards the current waypoint, minus
 `collision_penalty` for a primitive in which a body sphere enters the scene more than `collision_tolerance`
 (0 by default: collisions are reported in `info`, not paid). When a waypoint is passed the goal term's
-closest distance restarts from the next one.
+closest distance restarts from the next one. Arriving at the last waypoint also earns the remaining
+primitives at the best per-step reward (GammaReach's `goal_absorbing`), so that ending early never pays less
+than walking on.
 
 ## Starting State
 
@@ -75,7 +77,7 @@ from motion_envs.envs.options import check_known, index, number, point, real_arr
 from motion_envs.precision import PRECISIONS
 from motion_envs.priors.gamma_generator import GammaGenerator, GammaSeed, Primitive
 from motion_envs.render.env_view import RenderInputs
-from motion_envs.rewards import RewardConfig
+from motion_envs.rewards import RewardConfig, goal_absorbing_reward
 from motion_envs.scenes.layouts import FAMILIES, TEST_SEEDS, TRAIN_SEEDS, make_scene
 from motion_envs.scenes.paths import cell_costs, plan_path, split_legs
 from motion_envs.scenes.scene import Scene
@@ -361,8 +363,10 @@ class GammaWanderCore:
         penetration = self.penetration(moved.primitive.joints, state.scene)
         collided = penetration > config.collision_tolerance
         crowding = crowding_depth(moved.primitive.joints[:, :, PELVIS, :2], state.neighbours)
-        terms = {**moved.terms, "collision": -collided.float()}
-        reward = moved.reward - config.collision_penalty * collided.float()
+        remaining = (config.max_primitives - reach.steps).to(moved.reward.dtype)
+        terms = {**moved.terms, "collision": -collided.float(),
+                 "goal_absorbing": goal_absorbing_reward(reached, remaining, config.reward.best_step_reward)}  # fmt: skip
+        reward = moved.reward - config.collision_penalty * collided.float() + terms["goal_absorbing"]
         truncated = (reach.steps >= config.max_primitives) & ~reached
         next_state = dataclasses.replace(state, reach=reach, current=current, collisions=state.collisions + collided.long())
         result = GammaWanderStepResult(reward, terms, next_state.distance_left(pelvis), waypoint_distance, reached, reached,

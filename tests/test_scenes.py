@@ -62,6 +62,10 @@ def test_user_scene_files_load_with_labels_from_node_names_or_face_properties(tm
     scene = load_scene(glb)
     assert sorted(LABELS[p.label] for p in scene.parts) == ["chair", "floor", "other"]
     assert scene.grid.occupied.any() and scene.walkable.any()
+    from motion_envs.scenes.paths import plan_path
+
+    around = plan_path(scene, np.array([-1.0, -1.5]), np.array([-1.0, 1.5]))  # the 1 x 0.6 m table between them
+    assert around.length > 3.0 + 0.1 and np.all(np.abs(around.waypoints[:-1, 0] + 1.0) > 0.5 - 0.05)  # around it
 
     boxes = trimesh.creation.box(extents=(1, 1, 1))
     boxes.face_attributes["label"] = np.where(np.arange(12) < 6, LABELS.index("shelf"), LABELS.index("table")).astype(np.int32)

@@ -56,12 +56,13 @@ class OccupancyGrid:
 
 
 def build_occupancy(solids: list[trimesh.Trimesh], pitch: float = 0.05, height: float = 2.0,
-                    margin: float = 0.5) -> OccupancyGrid:  # fmt: skip
-    """Voxelise `solids` (world meshes) on a grid of `pitch` m. Raises ValueError when there are none."""
+                    margin: float = 0.5, floors: list[trimesh.Trimesh] = ()) -> OccupancyGrid:  # fmt: skip
+    """Voxelise `solids` (world meshes) on a grid of `pitch` m that spans them and the `floors` (plus `margin`), so
+    that open floor beyond the furniture is on the grid too. Raises ValueError when there are no solids."""
     if not solids:
         raise ValueError("a scene needs at least one solid (non-floor) part to build its occupancy grid")
-    low = np.min([mesh.bounds[0] for mesh in solids], axis=0)
-    high = np.max([mesh.bounds[1] for mesh in solids], axis=0)
+    low = np.min([mesh.bounds[0] for mesh in [*solids, *floors]], axis=0)
+    high = np.max([mesh.bounds[1] for mesh in [*solids, *floors]], axis=0)
     origin = np.array([low[0] - margin, low[1] - margin, 0.0])
     shape = tuple(int(np.ceil(extent / pitch)) for extent in (high[0] + margin - origin[0], high[1] + margin - origin[1], height))
     occupied = np.zeros(shape, dtype=bool)

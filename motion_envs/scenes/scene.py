@@ -48,7 +48,8 @@ class Scene:
     @cached_property
     def grid(self) -> OccupancyGrid:
         """Occupancy and signed distance of the solid (non-floor) parts, built on first use."""
-        return build_occupancy([p.mesh for p in self.parts if p.label != FLOOR], self.pitch)
+        return build_occupancy([p.mesh for p in self.parts if p.label != FLOOR], self.pitch,
+                               floors=[p.mesh for p in self.parts if p.label == FLOOR])  # fmt: skip
 
     @cached_property
     def walkable(self) -> np.ndarray:

@@ -105,7 +105,7 @@ from motion_envs.priors.wandr_features import FPS, PELVIS, WandrState
 from motion_envs.render.egocentric import EgocentricRenderer
 from motion_envs.render.env_view import EnvView, RenderInputs
 from motion_envs.rewards import ClopsRewardConfig, goal_found, stayed_still
-from motion_envs.scenes.layouts import FAMILIES, TEST_SEEDS, TRAIN_SEEDS, make_scene
+from motion_envs.scenes.layouts import FAMILIES, TRAIN_SEEDS, families_of, make_scene, seeds_of
 from motion_envs.scenes.scene import Scene
 
 RESET_OPTIONS = ("scene_seed", "start", "goal", "facing", "start_index")
@@ -241,13 +241,11 @@ class ClopsNavConfig:
     @property
     def families(self) -> tuple[str, ...]:
         """The layout families episodes are drawn from."""
-        return tuple(FAMILIES) if self.family == MIXED else (self.family,)
+        return families_of(self.family)
 
     @property
     def seeds(self) -> tuple[int, ...]:
-        if self.scene_seeds is not None:
-            return tuple(int(seed) for seed in self.scene_seeds)
-        return tuple(TRAIN_SEEDS[: self.train_scenes]) if self.split == "train" else tuple(TEST_SEEDS)
+        return seeds_of(self.split, self.train_scenes, self.scene_seeds)
 
     @property
     def max_frames(self) -> int:

@@ -78,7 +78,7 @@ from motion_envs.precision import PRECISIONS
 from motion_envs.priors.gamma_generator import GammaGenerator, GammaSeed, Primitive
 from motion_envs.render.env_view import RenderInputs
 from motion_envs.rewards import RewardConfig, goal_absorbing_reward
-from motion_envs.scenes.layouts import FAMILIES, TEST_SEEDS, TRAIN_SEEDS, make_scene
+from motion_envs.scenes.layouts import FAMILIES, TRAIN_SEEDS, families_of, make_scene, seeds_of
 from motion_envs.scenes.paths import cell_costs, plan_path, split_legs
 from motion_envs.scenes.scene import Scene
 
@@ -142,13 +142,12 @@ class GammaWanderConfig:
 
     @property
     def families(self) -> tuple[str, ...]:
-        return tuple(FAMILIES) if self.scene == MIXED else (self.scene,)
+        """The layout families episodes are drawn from."""
+        return families_of(self.scene)
 
     @property
     def seeds(self) -> tuple[int, ...]:
-        if self.scene_seeds is not None:
-            return tuple(int(seed) for seed in self.scene_seeds)
-        return tuple(TRAIN_SEEDS[: self.train_scenes]) if self.split == "train" else tuple(TEST_SEEDS)
+        return seeds_of(self.split, self.train_scenes, self.scene_seeds)
 
     def reach_config(self) -> GammaReachConfig:
         """The GammaReach task that steps the bodies: the waypoint radius for its goal reward, no ending of its own."""

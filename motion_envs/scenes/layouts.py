@@ -162,6 +162,19 @@ FAMILIES: dict[str, Callable[[_RoomBuilder], None]] = {
 """Layout family name -> builder, easiest to hardest."""
 
 
+def families_of(choice: str) -> tuple[str, ...]:
+    """The layout families an env's `choice` draws from: one family, or all of them for "mixed"."""
+    return tuple(FAMILIES) if choice == "mixed" else (choice,)
+
+
+def seeds_of(split: str, train_scenes: int, scene_seeds: tuple[int, ...] | None) -> tuple[int, ...]:
+    """An env's room seeds: `scene_seeds` when given, else the first `train_scenes` training seeds ('train') or the
+    held-out ones ('test')."""
+    if scene_seeds is not None:
+        return tuple(int(seed) for seed in scene_seeds)
+    return tuple(TRAIN_SEEDS[:train_scenes]) if split == "train" else tuple(TEST_SEEDS)
+
+
 def make_scene(family: str, seed: int) -> Scene:
     """The room of `family` for `seed` (deterministic)."""
     if family not in FAMILIES:

@@ -227,7 +227,7 @@ def _train_ppo(args: argparse.Namespace) -> int:
              "init": args.init, "log_std_init": args.log_std_init, "learning_rate": args.learning_rate,
              "n_steps": args.n_steps, "anchor": args.anchor, "ship": args.ship or None, "device": args.device,
              "env_kwargs": _env_options(args) or None, "engine": args.engine, "env_runners": args.env_runners,
-             "address": args.address, "cpus_per_env_runner": args.cpus_per_env_runner}  # fmt: skip
+             "address": args.address, "cpus_per_env_runner": args.cpus_per_env_runner, "keep": args.keep}  # fmt: skip
     config = PPOTrainConfig(command="motion-envs " + " ".join(sys.argv[1:]),
                             **{name: value for name, value in given.items() if value is not None})  # fmt: skip
     if config.run_dir == PPOTrainConfig.run_dir:
@@ -520,6 +520,8 @@ def parser() -> argparse.ArgumentParser:
     train.add_argument("--learning-rate", type=float, default=None, help="ppo, dqn: Adam learning rate")
     train.add_argument("--n-steps", type=int, default=None, help="ppo: primitives per body per rollout")
     train.add_argument("--anchor", type=float, default=None, help="ppo: weight of KL to the cloned policy (default 0)")
+    train.add_argument("--keep", choices=("best", "last"), default=None,
+                       help="ppo: ship the checkpoint of the best success window (default) or the last one")
     train.add_argument("--env-option", action="append", default=[], metavar="KEY=VALUE",
                        help="ppo, dqn: a further gym.make argument of the env, e.g. frames_per_step=2 (repeatable)")
     train.add_argument("--intentions", default=None,

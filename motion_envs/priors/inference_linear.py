@@ -26,6 +26,11 @@ from motion_envs.precision import native_bf16
 ONEDNN_LINEAR = getattr(torch.ops.mkldnn, "_linear_pointwise", None) if torch.backends.mkldnn.is_available() else None
 """oneDNN's linear with a fused activation (what torch.compile's CPU backend calls), where this torch has it."""
 
+ONEDNN_BF16 = ONEDNN_LINEAR is not None and bool(torch.ops.mkldnn._is_mkldnn_bf16_supported())
+"""Whether oneDNN has bf16 kernels on this CPU (it needs AVX-512 at least): asked of torch, not of the CPU flags, so
+that a wrong or mocked flag list (`motion_envs.precision.cpu_flags`) never sends bf16 to a primitive oneDNN cannot
+build (on an AVX2-only CPU: "could not create a primitive descriptor for the inner product")."""
+
 ACTIVATIONS: dict[type[nn.Module], str] = {nn.ReLU: "relu", nn.Tanh: "tanh", nn.LeakyReLU: "leaky_relu"}
 """Activation modules oneDNN applies inside the matmul, by its names for them."""
 
@@ -34,7 +39,7 @@ def takes_onednn(x: torch.Tensor) -> bool:
     """Whether linears on `x` run through oneDNN (see the module doc)."""
     if ONEDNN_LINEAR is None or x.device.type != "cpu" or torch.is_grad_enabled():
         return False
-    return x.dtype == torch.float32 or (x.dtype == torch.bfloat16 and native_bf16())
+    return x.dtype == torch.float32 or (x.dtype == torch.bfloat16 and ONEDNN_BF16 and native_bf16())
 
 
 def linear(x: torch.Tensor, weight: torch.Tensor, bias: torch.Tensor | None = None,

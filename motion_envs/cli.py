@@ -645,7 +645,7 @@ def parser() -> argparse.ArgumentParser:
     realism.set_defaults(run=_bench_gamma_realism)
 
     play = commands.add_parser("play", help="run episodes with a policy or baseline; write a video and a summary")
-    play.add_argument("env_id", help="motion_envs/GammaReach-v0, motion_envs/WandrReach-v0 or motion_envs/ClopsNav-v0")
+    play.add_argument("env_id", help="motion_envs/GammaReach-v0, motion_envs/GammaWander-v0, motion_envs/WandrReach-v0 or motion_envs/ClopsNav-v0")
     play.add_argument("--policy", type=Path, default=None, help="a saved policy (.zip: PPOKL, or DQN for ClopsNav)")
     play.add_argument("--baseline", default=None,
                       help="GammaReach: random | greedy-reward | greedy-distance (default random); WandrReach: sampler; ClopsNav: random")

@@ -31,15 +31,18 @@ from motion_envs.atomic import atomic_path
 from motion_envs.body.markers import foot_vertex_ids
 from motion_envs.data.primitives import GAMMA_FPS
 from motion_envs.envs.gamma_reach import GammaReachEnv
+from motion_envs.envs.gamma_wander import GammaWanderEnv
 from motion_envs.metrics import foot_skating, skating_threshold
 from motion_envs.body.canonical_frame import PELVIS
 from motion_envs.render.camera import follow_camera
+from motion_envs.render.env_view import ROOM_CAMERA
 from motion_envs.render.third_person import ThirdPersonRenderer
 from motion_envs.rollout import Rollout, RolloutRecorder
 
 BASELINES = ("random", "greedy-reward", "greedy-distance")
 GAMMA_ID, WANDR_ID, CLOPS_ID = "motion_envs/GammaReach-v0", "motion_envs/WandrReach-v0", "motion_envs/ClopsNav-v0"
-POLICY_KIND = {GAMMA_ID: "ppo_policy", WANDR_ID: "ppo_policy", CLOPS_ID: "dqn_policy"}
+WANDER_ID = "motion_envs/GammaWander-v0"
+POLICY_KIND = {GAMMA_ID: "ppo_policy", WANDER_ID: "ppo_policy", WANDR_ID: "ppo_policy", CLOPS_ID: "dqn_policy"}
 
 
 def policy_env_kwargs(env_id: str, policy: Path | None, env_kwargs: dict | None = None):
@@ -48,7 +51,11 @@ def policy_env_kwargs(env_id: str, policy: Path | None, env_kwargs: dict | None 
     from agents.policy_files import env_kwargs_for, expect_policy
 
     if env_id not in POLICY_KIND:
-        raise ValueError(f"play supports {GAMMA_ID}, {WANDR_ID} and {CLOPS_ID}, got {env_id!r}")
+        raise ValueError(f"play supports {', '.join(POLICY_KIND)}, got {env_id!r}")
+    if env_id == WANDER_ID:  # GammaReach policies drive GammaWander too (the same spaces); only its own say its kwargs
+        file = None if policy is None else expect_policy(policy, POLICY_KIND[env_id])
+        own = file is not None and file.trained_for is not None and file.trained_for.env_id == env_id
+        return file, env_kwargs_for(file if own else None, env_kwargs)
     file = None if policy is None else expect_policy(policy, POLICY_KIND[env_id], env_id)
     return file, env_kwargs_for(file, env_kwargs)
 
@@ -92,8 +99,8 @@ def play(env_id: str, policy: Path | None = None, baseline: str | None = None, v
         env = _wandr_env(video is not None, env_kwargs)
         controller = wandr_controller(policy, baseline, seed)
         fps, run = env.metadata["render_fps"], _wandr_episode
-    elif env_id == GAMMA_ID:
-        env = GammaReachEnv(**env_kwargs)
+    elif env_id in (GAMMA_ID, WANDER_ID):
+        env = GammaReachEnv(**env_kwargs) if env_id == GAMMA_ID else GammaWanderEnv(**env_kwargs)
         controller = controller_for(policy, baseline, seed)
         fps, run = GAMMA_FPS, _episode
     elif env_id == CLOPS_ID:
@@ -164,7 +171,7 @@ class LiveEpisodes:
 def _record_step(env, recorder: RolloutRecorder) -> None:
     """Add the frames the env's last step generated (GammaReach: a primitive's new frames; WandrReach: one;
     ClopsNav: the action's whole chunk)."""
-    if isinstance(env, GammaReachEnv):
+    if isinstance(env, (GammaReachEnv, GammaWanderEnv)):
         primitive, goal = env.last_primitive, env.state.goal[:1]
         for frame in torch.nonzero(primitive.new_frames()[0]).flatten().tolist():
             recorder.add(primitive.transl[:1, frame], primitive.global_orient[:1, frame], primitive.body_pose[:1, frame], goal)
@@ -177,8 +184,9 @@ def _record_step(env, recorder: RolloutRecorder) -> None:
     recorder.add(inputs.transl, inputs.global_orient, inputs.body_pose, inputs.goal)
 
 
-def _episode(env: GammaReachEnv, controller: Callable, writer, seed: int, every: int, search: int | None,
+def _episode(env: GammaReachEnv | GammaWanderEnv, controller: Callable, writer, seed: int, every: int, search: int | None,
              recorder: RolloutRecorder | None) -> dict:  # fmt: skip
+    """A GammaReach or GammaWander episode (GammaWander: in its room, with the route ahead drawn)."""
     env.reset(seed=seed)
     plan = None
     if search is not None:
@@ -186,8 +194,11 @@ def _episode(env: GammaReachEnv, controller: Callable, writer, seed: int, every:
 
         plan = beam_search(env.core, env.state, controller, SearchSettings(keep=search)).latents[0]
     body, feet_ids = env.core.generator.body, foot_vertex_ids()
-    renderer = ThirdPersonRenderer(env.core.body) if writer is not None else None
-    feet, contact, trail = [], [], [env.trail[0]]
+    scene = env.core.render_scene(env.state) if hasattr(env.core, "render_scene") else None
+    if recorder is not None and hasattr(env.core, "scene_spec"):  # the viewer rebuilds the room from "family:seed"
+        recorder.scene = env.core.scene_spec(env.state)
+    renderer = ThirdPersonRenderer(env.core.body, scene=scene) if writer is not None else None
+    feet, contact, trail = [], [], [env.state.seed.joints[0, -1, PELVIS].numpy()]
     info: dict = {}
     steps = 0
     for steps in range(1, env.config.max_primitives + 1):
@@ -206,9 +217,10 @@ def _episode(env: GammaReachEnv, controller: Callable, writer, seed: int, every:
             vertices = renderer.vertices(transl, orient, pose)
             for frame in range(0, len(vertices), every):
                 trail.append(pelvis[frame])
-                image = renderer.render(vertices[frame : frame + 1], follow_camera(pelvis[frame]),
-                                        goal=env.state.goal[0].numpy(), goal_radius=env.config.goal_radius,
-                                        trail=np.array(trail))  # fmt: skip
+                camera = follow_camera(pelvis[frame], **(ROOM_CAMERA if scene is not None else {}))
+                routes = env.core.render_paths(env.state)[:1] if hasattr(env.core, "render_paths") else None
+                image = renderer.render(vertices[frame : frame + 1], camera, goal=env.state.goal[0].numpy(),
+                                        goal_radius=env.config.goal_radius, trail=np.array(trail), routes=routes)  # fmt: skip
                 writer.append_data(image)
         if terminated or truncated:
             break
@@ -220,6 +232,7 @@ def _episode(env: GammaReachEnv, controller: Callable, writer, seed: int, every:
         "final_distance": round(info["distance"], 3),
         "contact_score": round(float(np.mean(contact)), 3),
         "foot_skating": round(float(foot_skating(all_feet, skating_threshold(GAMMA_FPS)).float().mean()), 3),
+        **({"collisions": info["collisions"]} if "collisions" in info else {}),
     }
 
 

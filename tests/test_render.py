@@ -92,3 +92,10 @@ def test_play_writes_a_video_of_every_kept_frame_and_summarises(tmp_path):
     assert frames.shape[1:] == (360, 480, 3) and len(frames) == 3 + 2 + 2  # 9, 8, 8 new frames, every 4th
     with pytest.raises(ValueError, match="unknown baseline"):
         play("motion_envs/GammaReach-v0", baseline="dance")
+    from motion_envs.priors.training import WEIGHTS_DIR
+    from motion_envs.rollout import Rollout
+
+    (wander,) = play("motion_envs/GammaWander-v0", WEIGHTS_DIR / "ppo_gammareach_alpha1_paper.zip", video=video, every=4,
+                     save_rollout=tmp_path / "wander.npz", max_primitives=3, scene="living")  # a GammaReach policy drives it
+    assert wander["steps"] == 3 and "collisions" in wander and len(iio.imread(video)) == 7
+    assert Rollout.load(tmp_path / "wander.npz").scene.startswith("living:")

@@ -392,6 +392,11 @@ class GammaWanderCore:
         slot = int(state.scene[0])
         return None if slot < 0 else self.scenes[slot]
 
+    def scene_spec(self, state: GammaWanderState) -> str:
+        """The first body's room as "family:seed" ("" on open ground or in a loaded scene): what rollouts record."""
+        slot = int(state.scene[0])
+        return next((f"{family}:{seed}" for (family, seed), known in self._slot_of.items() if known == slot), "")
+
     def render_paths(self, state: GammaWanderState) -> list[np.ndarray]:
         """Per body, (W, 3) the waypoints still ahead, on the ground."""
         paths = []
@@ -452,6 +457,8 @@ class GammaWanderEnv(gym.Env):
         self.vector = GammaWanderVectorEnv(1, generator, render_mode, render_bodies=1, **kwargs)
         self.core, self.config, self.render_mode = self.vector.core, self.vector.config, render_mode
         self.action_space, self.observation_space = self.vector.single_action_space, self.vector.single_observation_space
+        self.last_primitive: Primitive | None = None
+        """The primitive the last step generated (what `motion-envs play` records and renders frame by frame)."""
 
     @property
     def state(self) -> GammaWanderState | None:
@@ -474,7 +481,7 @@ class GammaWanderEnv(gym.Env):
             raise RuntimeError("call reset() before step()")
         z = check_actions(action, self.action_space.shape, batch=None)
         state, result = self.core.step(self.vector.state, torch.as_tensor(z)[None])
-        self.vector.state = state
+        self.vector.state, self.last_primitive = state, result.primitive
         self.vector.record_trails(torch.zeros(1, dtype=torch.bool))
         return (self.core.observe(state)[0].cpu().numpy().astype(np.float32), float(result.reward[0]),
                 bool(result.terminated[0]), bool(result.truncated[0]), _step_info(result, state, 0))  # fmt: skip

@@ -190,7 +190,7 @@ def _populate(args: argparse.Namespace) -> int:
     if scene is None:
         print("motion-envs populate: give a room (--scene living:1003) or a scene file (--scene-file)", file=sys.stderr)
         return 2
-    proposal = PolicyLatent(args.policy or WEIGHTS_DIR / "ppo_gammareach_alpha1_paper.zip", seed=args.seed)
+    proposal = PolicyLatent(args.policy or WEIGHTS_DIR / "ppo_gammawander_alpha1_paper.zip", seed=args.seed)
     search = None if args.no_search else SearchSettings(roots=args.roots, children=4, keep=2, max_depth=args.horizon)
     if args.threads:
         torch.set_num_threads(args.threads)
@@ -665,7 +665,7 @@ def parser() -> argparse.ArgumentParser:
     crowd.add_argument("--bodies", type=int, default=16)
     crowd.add_argument("--seconds", type=float, default=30.0)
     crowd.add_argument("--seed", type=int, default=0)
-    crowd.add_argument("--policy", type=Path, default=None, help="GammaReach PPO policy proposing latents (default: shipped alpha=1)")
+    crowd.add_argument("--policy", type=Path, default=None, help="PPO policy proposing latents (default: the shipped GammaWander policy; GammaReach policies work too)")
     crowd.add_argument("--no-search", action="store_true", help="play the policy's latents without tree search")
     crowd.add_argument("--roots", type=int, default=8, help="search: latents tried per body and primitive")
     crowd.add_argument("--horizon", type=int, default=2, help="search: primitives looked ahead")

@@ -34,14 +34,13 @@ from benchmarks.machine import machine_line
 from motion_envs.atomic import atomic_write
 from motion_envs.envs.gamma_wander import GammaWanderConfig, GammaWanderCore, GammaWanderState
 from motion_envs.plots import grid_of_axes, save, top_down
-from motion_envs.populate import populate
+from motion_envs.populate import PRIMITIVE_SECONDS, populate
 from motion_envs.priors.training import WEIGHTS_DIR
 from motion_envs.scenes.layouts import FAMILIES, TEST_SEEDS, make_scene
 from motion_envs.scenes.paths import far_ends
 from motion_envs.wrappers.tree_search import SearchCost, SearchSettings
 
 RESULTS = Path(__file__).resolve().parent / "results"
-PRIMITIVE_SECONDS = 0.25
 POLICY = WEIGHTS_DIR / "ppo_gammareach_alpha1_paper.zip"
 WANDER_POLICY = WEIGHTS_DIR / "ppo_gammawander_alpha1_paper.zip"
 COSTS = {"distance": SearchCost.distance_only(), "release": SearchCost()}

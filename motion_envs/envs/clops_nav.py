@@ -96,7 +96,7 @@ from motion_envs.body.head_camera import camera_from_head
 from motion_envs.body.rotations import about_z, matrix_to_sixd
 from motion_envs.counter_random import counter_normal
 from motion_envs.envs.core import CoreVectorEnv, check_actions, config_from_kwargs
-from motion_envs.envs.options import check_known, index, number, point, real_array
+from motion_envs.envs.options import check_known, index, number, point, scene_seed_option
 from motion_envs.envs.starts import DeltaPriorBodies, StartBodies
 from motion_envs.metrics import lowest_foot, track_skating
 from motion_envs.priors.clops import ClopsPrior, ClopsStepper, HeadPose, action_targets, head_pose, head_yaw, yaw_change
@@ -129,18 +129,6 @@ def looked_bins(yaw: torch.Tensor, fov: float) -> torch.Tensor:
 
 GOAL_CEILING = 3.0
 """Highest goal centre a `goal` reset option may ask for (m): the rooms' walls are lower."""
-
-
-def scene_seed_option(options: dict[str, Any], bodies: int) -> np.ndarray | None:
-    """(bodies,) int64 scene seeds of the `scene_seed` option (one seed for all, or one per body), or None."""
-    if "scene_seed" not in options:
-        return None
-    seeds = real_array(options["scene_seed"], "scene_seed")
-    if seeds.ndim > 1 or (seeds.ndim == 1 and len(seeds) != bodies):
-        raise ValueError(f"option 'scene_seed' must be one seed or one per body ({bodies}), got shape {seeds.shape}")
-    if (seeds != np.round(seeds)).any() or (seeds < 0).any() or (seeds >= 2**32).any():
-        raise ValueError(f"option 'scene_seed' must be integers in [0, 2**32), got {options['scene_seed']!r}")
-    return np.broadcast_to(seeds.astype(np.int64), (bodies,))
 
 
 def check_start(scene: Scene, start: np.ndarray) -> np.ndarray:

@@ -48,7 +48,7 @@ within `goal_radius` (0.3 m, DART's) of the last waypoint after the others. Trun
 ## Arguments
 
 `gym.make("motion_envs/GammaWander-v0", **kwargs)` with any field of `GammaWanderConfig`.
-`reset(options=...)` takes `scene_seed`, `start` ((x, y)), `goal` ((x, y): a path is planned to it),
+`reset(options=...)` takes `scene_seed` (one seed, or one per body), `start` ((x, y)), `goal` ((x, y): a path is planned to it),
 `waypoints` (K × (x, y), used as given; the last is the goal), `facing` (radians) and `start_index`.
 
 ## Info
@@ -73,7 +73,7 @@ from motion_envs.body.canonical_frame import PELVIS
 from motion_envs.body.collision_spheres import spheres_of_joints
 from motion_envs.envs.core import CoreVectorEnv, check_actions, config_from_kwargs
 from motion_envs.envs.gamma_reach import OBSERVATION_SIZE, GammaReachConfig, GammaReachCore, GammaReachState
-from motion_envs.envs.options import check_known, index, number, point, real_array
+from motion_envs.envs.options import check_known, index, number, point, scene_seed_option
 from motion_envs.precision import PRECISIONS
 from motion_envs.priors.gamma_generator import GammaGenerator, GammaSeed, Primitive
 from motion_envs.render.env_view import RenderInputs
@@ -279,13 +279,14 @@ class GammaWanderCore:
         given_start, given_goal = point(options, "start", 2), point(options, "goal", 2)
         given_waypoints = point(options, "waypoints", 2, many=True)
         given_facing, given_row = number(options, "facing"), index(options, "start_index", self.reach.num_starts)
-        given_seed = _scene_seed(options)
+        given_seeds = scene_seed_option(options, len(rngs))
         slots, starts, paths, facings, rows = [], [], [], [], []
-        for rng in rngs:  # a few draws per body (and a path plan), so each body's episode follows its own seed
+        for body, rng in enumerate(rngs):  # a few draws per body (and a path plan), so each body's episode follows its own seed
             slot = -1
             if config.scene != FLAT:
                 family = config.families[int(rng.integers(len(config.families)))] if len(config.families) > 1 else config.families[0]
-                slot = self.slot(family, given_seed if given_seed is not None else config.seeds[int(rng.integers(len(config.seeds)))])
+                drawn = config.seeds[int(rng.integers(len(config.seeds)))] if given_seeds is None else int(given_seeds[body])
+                slot = self.slot(family, drawn)
             start, path = self._start_and_path(slot, rng, given_start, given_goal, given_waypoints)
             slots.append(slot), starts.append(start), paths.append(path)
             facings.append(given_facing if given_facing is not None else float(rng.uniform(-math.pi, math.pi)))
@@ -412,16 +413,6 @@ def crowding_depth(pelvis: torch.Tensor, neighbours: torch.Tensor) -> torch.Tens
         return torch.zeros(len(pelvis), device=pelvis.device)
     gaps = torch.cdist(pelvis, neighbours).amin(dim=(1, 2))
     return (PERSONAL_SPACE - gaps).clamp(min=0.0)
-
-
-def _scene_seed(options: dict[str, Any]) -> int | None:
-    """The `scene_seed` option: one non-negative integer, or None."""
-    if "scene_seed" not in options:
-        return None
-    seed = real_array(options["scene_seed"], "scene_seed")
-    if seed.shape != () or seed != np.round(seed) or seed < 0:
-        raise ValueError(f"option 'scene_seed' must be one non-negative integer, got {options['scene_seed']!r}")
-    return int(seed)
 
 
 def _step_info(result: GammaWanderStepResult, state: GammaWanderState, row: int) -> dict[str, Any]:

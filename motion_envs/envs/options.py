@@ -80,3 +80,15 @@ def index(options: dict[str, Any], name: str, count: int, low: int = 0) -> int |
     if not low <= int(value) < count:
         raise ValueError(f"option {name!r} must lie in [{low}, {count}), got {value!r}")
     return int(value)
+
+
+def scene_seed_option(options: dict[str, Any], bodies: int) -> np.ndarray | None:
+    """(bodies,) int64 scene seeds of the `scene_seed` option (one seed for all, or one per body), or None."""
+    if "scene_seed" not in options:
+        return None
+    seeds = real_array(options["scene_seed"], "scene_seed")
+    if seeds.ndim > 1 or (seeds.ndim == 1 and len(seeds) != bodies):
+        raise ValueError(f"option 'scene_seed' must be one seed or one per body ({bodies}), got shape {seeds.shape}")
+    if (seeds != np.round(seeds)).any() or (seeds < 0).any() or (seeds >= 2**32).any():
+        raise ValueError(f"option 'scene_seed' must be integers in [0, 2**32), got {options['scene_seed']!r}")
+    return np.broadcast_to(seeds.astype(np.int64), (bodies,))

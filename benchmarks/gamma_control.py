@@ -22,7 +22,12 @@ GammaReach policy (sampled latents, as the paper), the α = 10 and α = 1
 paper-reward policies with top-1 and top-4 search (the release's node cost
 and distance alone), random z with top-4 search, and with `--bf16` (or when the CPU has native bf16) the
 α = 10 policy with the prior's networks in bf16 (`GammaGenerator.set_precision`).
-`--quick` (the README's main job) runs fewer pairs and clones. Writes
+Per body: GAMMA's any-of-32 hides single bodies that fail, so every policy
+row also runs each clone on its own (`run_bodies`: no clone stops another;
+each goes on until it reaches the goal or 60 primitives) and a second table
+gives per-body success by the goal's direction from the start body's facing
+(`DIRECTIONS`: ahead < 60°, side, behind > 120°) and by its distance
+(`DISTANCES`). `--quick` (the README's main job) runs fewer pairs and clones. Writes
 `benchmarks/results/gamma_control.md` (or `gamma_control_quick.md`) and a
 top-down plot of the first clone (or chosen branch) per pair.
 """
@@ -53,6 +58,7 @@ from motion_envs.envs.gamma_reach import GammaReachConfig, GammaReachCore, Gamma
 from motion_envs.metrics import foot_skating, skating_threshold
 from motion_envs.body.canonical_frame import PELVIS
 from motion_envs.priors.training import WEIGHTS_DIR
+from motion_envs.rewards import facing_direction
 from motion_envs.wrappers.tree_search import SearchCost, SearchSettings, beam_search
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -111,6 +117,7 @@ def summarise(parts: list[dict]) -> dict:
         "FS": skating[0] / skating[1],
         "paths": np.concatenate([part["paths"] for part in parts]),
         "seconds": sum(part.get("seconds", 0.0) for part in parts),
+        **({"per body": np.concatenate([part["per body"] for part in parts])} if "per body" in parts[0] else {}),
     }
 
 
@@ -151,6 +158,55 @@ def run_search(core: GammaReachCore, start: GammaReachState, proposal: Controlle
         going = found.length[live] > level + 1
         state, live = state.index(going.to(state.steps.device)), live[going]
     return recorder.row(found.length, found.reached, found.spread)
+
+
+@torch.no_grad()
+def run_bodies(core: GammaReachCore, start: GammaReachState, controller: Controller, clones: int) -> np.ndarray:
+    """Per-body success: `clones` copies of every pair, each on its own until it reaches the goal or the horizon
+    (no clone's arrival stops another). Returns (pairs, clones) bool."""
+    state = start.repeat(clones)  # clones of a pair are adjacent rows
+    reached = torch.zeros(state.num_bodies, dtype=torch.bool)
+    live = torch.arange(state.num_bodies)
+    for _ in tqdm(range(core.config.max_primitives), desc="primitives, per body", leave=False):
+        state, result = core.step(state, controller(core, state))
+        arrived = result.reached.cpu()
+        reached[live[arrived]] = True
+        if arrived.all():
+            break
+        state, live = state.index((~arrived).to(state.steps.device)), live[~arrived]
+    return reached.reshape(start.num_bodies, clones).numpy()
+
+
+DIRECTIONS = {"ahead (< 60°)": (0.0, 60.0), "side (60–120°)": (60.0, 120.0), "behind (> 120°)": (120.0, 180.01)}
+"""Goal direction bins: the angle between the start body's facing and the ground direction to its goal."""
+DISTANCES = {"< 4 m": (0.0, 4.0), "4–8 m": (4.0, 8.0), "≥ 8 m": (8.0, float("inf"))}
+"""Goal distance bins: pelvis to goal on the ground at the start."""
+
+
+def goal_bearings(start: GammaReachState) -> tuple[np.ndarray, np.ndarray]:
+    """(pairs,) the angle (degrees, 0–180) between each start body's facing and the ground direction to its goal,
+    and (pairs,) the goal's ground distance from the pelvis (m)."""
+    joints = start.seed.joints[:, -1]
+    to_goal = start.goal[:, :2] - joints[:, PELVIS, :2]
+    distance = to_goal.norm(dim=-1)
+    cosine = (facing_direction(joints) * to_goal / distance[:, None].clamp_min(1e-6)).sum(-1).clamp(-1.0, 1.0)
+    return torch.rad2deg(torch.arccos(cosine)).cpu().numpy(), distance.cpu().numpy()
+
+
+def per_body_table(rows: dict[str, dict], start: GammaReachState) -> list[str]:
+    """Per-body success of the rows that ran `run_bodies`, by goal direction and distance (pairs in each bin)."""
+    angle, distance = goal_bearings(start)
+    bins = {**{name: (angle >= low) & (angle < high) for name, (low, high) in DIRECTIONS.items()},
+            **{name: (distance >= low) & (distance < high) for name, (low, high) in DISTANCES.items()}}  # fmt: skip
+    header = " | ".join(f"{name} ({int(mask.sum())})" for name, mask in bins.items())
+    lines = [f"| controller | any clone (paper's) | per body | {header} |", "|---" * (len(bins) + 3) + "|"]
+    for name, row in rows.items():
+        if "per body" not in row:
+            continue
+        bodies = row["per body"]
+        cells = " | ".join(f"{bodies[mask].mean():.2f}" if mask.any() else "–" for mask in bins.values())
+        lines.append(f"| {name} | {row['success rate']:.2f} | {bodies.mean():.2f} | {cells} |")
+    return lines
 
 
 def policy_label(path: Path) -> str:
@@ -204,6 +260,9 @@ def run_shard(row: GammaRow, first: int, last: int, seed: int) -> dict:
     proposal = PolicyLatent(row.policy, seed=shard_seed) if row.controller == "policy" else RandomLatent(shard_seed)
     if row.keep is None:
         result = run_clones(core, start, proposal, row.clones)
+        if row.controller == "policy":
+            bodies = PolicyLatent(row.policy, seed=shard_seed + 1)
+            result["per body"] = run_bodies(core, start, bodies, row.clones)
     else:
         cost = SearchCost() if row.cost == "release" else SearchCost.distance_only()
         result = run_search(core, start, proposal, SearchSettings(keep=row.keep, cost=cost))
@@ -268,7 +327,11 @@ def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False,
         "0.1 × orientation + 0.1 × distance) or distance alone (`SearchCost.distance_only`). Policies sample their latents. "
         f"Pairs run in groups of {PAIRS_PER_TASK} (`benchmarks.fanout`), "
         + ("in this process" if ray_address is None else f"as Ray tasks ({ray_address})") + "; seconds: a row's groups, summed.",
-        "", *table(rows, PAPER_ROWS),
+        "", *table(rows, PAPER_ROWS), "",
+        f"Per body: each policy row again with its {clones} clones of every pair on their own (none stops another), "
+        "success by the goal's direction from the start body's facing and by its distance (pairs per bin in brackets); "
+        "the first column is the table's any-of-clones figure. A policy row's seconds include this run.",
+        "", *per_body_table(rows, start),
     ]  # fmt: skip
     lines += ["", f"The prior's networks ran in {core.generator.precision} (`precision=\"auto\"`: bf16 only on a CPU with "
               "native bf16, `motion_envs.precision`)."]  # fmt: skip

@@ -128,26 +128,31 @@ def play(env_id: str, policy: Path | None = None, baseline: str | None = None, v
 
 class LiveEpisodes:
     """Episodes played on demand for the live viewer: `more()` returns the frames of the next steps (about
-    one second of motion), starting a new episode (next seed) when one ends. ClopsNav episodes all play in
-    one held-out room (test seed 1000 + `seed`), the one the viewer shows."""
+    one second of motion), starting a new episode (next seed) when one ends. ClopsNav and GammaWander
+    episodes all play in one held-out room (test seed 1000 + `seed` of the env's family), the one the viewer
+    shows."""
 
     def __init__(self, env_id: str, policy: Path | None = None, baseline: str | None = None, seed: int = 0,
                  env_kwargs: dict | None = None) -> None:  # fmt: skip
         file, env_kwargs = policy_env_kwargs(env_id, policy, env_kwargs)
         self.env_id, self.seed = env_id, seed
+        from motion_envs.scenes.layouts import TEST_SEEDS
+
+        one_room = {"split": "test", "scene_seeds": (TEST_SEEDS[0] + seed,), **env_kwargs}
         if env_id == CLOPS_ID:
             from motion_envs.envs.clops_nav import ClopsNavEnv
-            from motion_envs.scenes.layouts import TEST_SEEDS
 
-            self.env = ClopsNavEnv(**{"split": "test", "scene_seeds": (TEST_SEEDS[0] + seed,), **env_kwargs})
+            self.env = ClopsNavEnv(**one_room)
             self.env.keep_frames = True
             self.controller = clops_controller(policy, baseline, seed)
         elif env_id == WANDR_ID:
             self.env, self.controller = _wandr_env(False, env_kwargs), wandr_controller(policy, baseline, seed)
+        elif env_id == WANDER_ID:
+            self.env, self.controller = GammaWanderEnv(**one_room), controller_for(policy, baseline, seed)
         else:
             self.env, self.controller = GammaReachEnv(**env_kwargs), controller_for(policy, baseline, seed)
         check_policy(file, self.env)
-        self.fps = GAMMA_FPS if env_id == GAMMA_ID else 30
+        self.fps = GAMMA_FPS if env_id in (GAMMA_ID, WANDER_ID) else 30
         self.observation, _ = self.env.reset(seed=seed)
         self.done = False
 
@@ -157,9 +162,10 @@ class LiveEpisodes:
             if self.done:
                 self.seed += 1
                 self.observation, _ = self.env.reset(seed=self.seed)
+            if hasattr(self.env.core, "scene_spec"):  # the viewer rebuilds the room from "family:seed"
+                recorder.scene = self.env.core.scene_spec(self.env.state)
             if self.env_id == CLOPS_ID:
                 action = self.controller(self.env, self.observation)
-                recorder.scene = self.env.core.scene_spec(self.env.state)
             else:
                 action = self.controller(self.env.core, self.env.state)[0].numpy()
             self.observation, _, terminated, truncated, _ = self.env.step(action)

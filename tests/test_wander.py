@@ -174,3 +174,16 @@ def test_populate_end_to_end_writes_a_rollout_a_video_and_views_from_above(tmp_p
     hits = [np.linalg.norm(cut.ray.intersects_location([eye], [d])[0] - eye, axis=1) for d in directions]
     assert all(len(h) == 0 or h.min() > np.linalg.norm(p - eye) for h, p in zip(hits, head))  # every head in view
     assert eye[2] > 2.5 and np.linalg.norm(look[:2] - pelvis[:, :2].mean(axis=0)) < 0.1  # above the walls, on the bodies
+
+
+def test_live_episodes_feed_the_viewer_gamma_wander_primitives_in_one_room():
+    """`motion-envs view --env motion_envs/GammaWander-v0` plays GammaWander (not GammaReach) in one held-out
+    room that every chunk names, across the end of an episode."""
+    from motion_envs.play import LiveEpisodes
+
+    live = LiveEpisodes("motion_envs/GammaWander-v0", seed=0, env_kwargs={"scene": "living", "max_primitives": 3})
+    assert isinstance(live.env, GammaWanderEnv)
+    chunks = [live.more() for _ in range(3)]  # 5 primitives (8 new frames each) a chunk: episodes end inside chunks
+    assert all(len(chunk.transl) >= 40 for chunk in chunks)  # about a second of 40 fps frames each
+    assert {chunk.scene for chunk in chunks} == {f"living:{TEST_SEEDS[0]}"}
+    assert live.seed >= 2  # later episodes began, in the same room

@@ -36,6 +36,7 @@ from agents.ppo_kl import PAPER_SETTINGS, PPOKL  # noqa: E402
 from agents.vec_env import NativeVecEnv  # noqa: E402
 from motion_envs.atomic import atomic_write  # noqa: E402
 from motion_envs.data.goal_windows import GoalWindows  # noqa: E402
+from motion_envs.precision import cpu_description  # noqa: E402
 from motion_envs.priors.training import announce_replacement, record_in_manifest, weights_destination  # noqa: E402
 
 
@@ -242,7 +243,8 @@ def clone_into(model: PPOKL, clone_from: GoalWindows, config: PPOTrainConfig) ->
 def ship_policy(model: Any, config: Any, curve: list[dict], kind: str, best: bool = True,
                 steps_label: str = "env steps (primitives)", **extra: Any) -> dict:  # fmt: skip
     """Write the run's best-window checkpoint (or the last model) to `config.weights_path()` without its optimiser
-    state, record a manifest entry (kind, config, steps, curve, `extra`) and plot the curve; returns the entry."""
+    state, record a manifest entry (kind, config, steps, curve, torch, machine, `extra`) and plot the curve; returns
+    the entry."""
     weights = config.weights_path()
     top = max(curve, key=lambda point: point["success_rate"]) if curve else None
     shipped_best = best and top is not None and (config.run_dir / "best.zip").exists()
@@ -255,6 +257,7 @@ def ship_policy(model: Any, config: Any, curve: list[dict], kind: str, best: boo
     atomic_write(weights, chosen.save)
     entry = {"kind": kind, "config": {k: str(v) if isinstance(v, Path) else v for k, v in asdict(config).items()},
              "timesteps": int(model.num_timesteps), "curve": curve, "torch": str(torch.__version__),
+             "machine": cpu_description(),
              "shipped": f"best window: {top['timesteps']} steps" if shipped_best else "last", **extra}  # fmt: skip
     record_in_manifest(weights, entry)
     plot_curve(curve, config.run_dir / "curve.png", steps_label)

@@ -9,6 +9,8 @@ An explicit precision ("float32" or "bfloat16") always wins over "auto".
 from __future__ import annotations
 
 import functools
+import os
+import platform
 from pathlib import Path
 
 import torch
@@ -16,6 +18,8 @@ import torch
 PRECISIONS = ("auto", "float32", "bfloat16")
 NATIVE_BF16_FLAGS = ("amx_bf16", "avx512_bf16")
 """CPU flags (as /proc/cpuinfo names them) of native bf16 matrix arithmetic."""
+ISA_FLAGS = ("avx2", "fma", "avx512f", "avx512_bf16", "avx512_fp16", "amx_tile", "amx_bf16")
+"""The instruction-set flags that decide torch's CPU kernels (and whether bf16 is native), as /proc/cpuinfo names them."""
 
 
 def _cpuinfo(*keys: str) -> str:
@@ -56,3 +60,12 @@ def resolve_precision(precision: str, device: str | torch.device = "cpu") -> str
     if precision != "auto":
         return precision
     return "bfloat16" if native_bf16(device) else "float32"
+
+
+def cpu_description() -> str:
+    """The CPU model, its core count and its ISA flags that matter to torch, e.g. "AMD EPYC, 2 cores; CPU flags
+    avx2, fma (bf16 emulated)": what benchmarks and training records say they ran on."""
+    cpu = cpu_model() or platform.processor() or platform.machine()
+    flags = [flag for flag in ISA_FLAGS if flag in cpu_flags()]
+    native = "native bf16" if native_bf16() else "bf16 emulated"
+    return f"{cpu}, {os.cpu_count()} cores; CPU flags {', '.join(flags) or 'none of ' + ', '.join(ISA_FLAGS)} ({native})"

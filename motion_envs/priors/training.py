@@ -28,6 +28,7 @@ from torch.utils.tensorboard import SummaryWriter
 from tqdm import tqdm
 
 from motion_envs.atomic import atomic_write
+from motion_envs.precision import cpu_description
 from motion_envs.priors.checkpoint import load_checkpoint, save_checkpoint
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
@@ -170,9 +171,10 @@ def fit(
 
 
 def ship(model: nn.Module, weights: Path, entry: dict[str, Any]) -> dict[str, Any]:
-    """Write float16 weights with `entry` (kind, config, figures) and record `entry` in the manifest."""
+    """Write float16 weights with `entry` (kind, config, figures; torch and the machine added) and record `entry`
+    in the manifest."""
     half = {name: value.half() if value.is_floating_point() else value for name, value in model.state_dict().items()}
-    entry = {**entry, "torch": str(torch.__version__)}
+    entry = {**entry, "torch": str(torch.__version__), "machine": cpu_description()}
     announce_replacement(weights)
     save_checkpoint(weights, {**entry, "model": half})
     record_in_manifest(weights, entry)

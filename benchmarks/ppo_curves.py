@@ -29,15 +29,16 @@ def main() -> int:
              "Per-body success of training episodes (sampled latents), recorded every 3 minutes; the shipped "
              "checkpoint is the best window. GammaReach policies start from the data's cloned latents, the WandrReach "
              "policy from WANDR's sampler (mean 0, σ = 1). One thread per run.", "",
-             "| policy | command | first window | best window | at steps | at minutes | env steps in all |",
-             "|---|---|---|---|---|---|---|"]  # fmt: skip
+             "| policy | command | first window | best window | at steps | at minutes | env steps in all | machine |",
+             "|---|---|---|---|---|---|---|---|"]  # fmt: skip
     for name, entry in runs.items():
         curve = entry["curve"]
         rates = [point["success_rate"] for point in curve]
         label = Path(name).stem.removeprefix("ppo_")
         best = max(curve, key=lambda point: point["success_rate"])
         lines.append(f"| {label} | `{entry['config']['command']}` | {rates[0]:.2f} | {best['success_rate']:.2f} | "
-                     f"{best['timesteps']:,} | {best['wall_seconds'] / 60:.0f} | {entry['timesteps']:,} |")  # fmt: skip
+                     f"{best['timesteps']:,} | {best['wall_seconds'] / 60:.0f} | {entry['timesteps']:,} | "
+                     f"{entry.get('machine', 'not recorded')} |")  # fmt: skip
     curves = {Path(name).stem.removeprefix("ppo_"): entry["curve"] for name, entry in runs.items()}
     learning_curves(by_steps, by_time, curves, steps_label="env steps (GammaReach: primitives; WandrReach: frames)")
     by_steps.set(ylabel="success rate (per body)", ylim=(0, 1))

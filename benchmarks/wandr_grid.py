@@ -43,7 +43,18 @@ learned conditional prior p(z | c) in place of N(0, I) (`--learned-prior`,
 (40 epochs) 0.8 / 69.0, 72.0 / 76.0 (z = 0 paced: 63.6 / 65.1). Trained from scratch with the shipped
 recipe but every goal ≥ 1.5 m away: 3.2 / 65.6, 65.0 / 79.8.
 `benchmarks.wandr_pace` shows why: the prior lags its own intention on
-the windows it was trained on.
+the windows it was trained on. The figures of this paragraph and the two
+above were measured on the previous shipped prior (uncleaned CMU data); the
+shipped prior is now the one retrained on the cleaned data (CMU + ACCAD,
+contact loss, rollouts of up to 60 frames), and the previous one is a
+variant row when its weights are at hand (`git show
+6f9e93a:motion_envs/priors/weights/wandr.pt > runs/wandr_weights/wandr_uncleaned.pt`).
+
+Two speed columns show whether a row walks or runs: the share of every
+half-second span of pelvis ground motion (before the rollout ends) faster
+than the data's fastest walk (`WALK_SPEED`, 2.1 m/s), and the median over
+rollouts of each one's fastest half second; the data's own distribution is
+printed below the table.
 
 Rows: the WANDR sampler (z ~ N(0, I) every frame) on the shipped prior and
 on every ablation / data variant whose weights are in `runs/wandr_weights/`
@@ -84,7 +95,9 @@ from motion_envs.envs.wandr_reach import WandrReachConfig, WandrReachCore, Wandr
 from motion_envs.priors.train_wandr import WandrClips, load_wandr
 from motion_envs.priors.training import WEIGHTS_DIR
 from motion_envs.priors.wandr import WandrStepper
-from motion_envs.priors.wandr_features import FPS
+from motion_envs.metrics import window_speeds
+from motion_envs.priors.wandr_features import FPS, PELVIS
+from motion_envs.rewards import WandrRewardConfig
 from motion_envs.plots import plt, save, success_by
 from motion_envs.data.paths import SHIPPED_SUBSETS
 
@@ -94,6 +107,8 @@ HEIGHT_RANGE, DISTANCE_RANGE = (0.0, 1.8), (0.5, 5.0)
 PACED_START_S, PACED_SPEED = 1.0, 1.2
 """The paced sampler's deadline: t_G = PACED_START_S + d / PACED_SPEED seconds for a goal d metres away."""
 PACED_LABEL = f"WANDR sampler, paced t_G = {PACED_START_S:g} s + d / {PACED_SPEED:g} m/s (ours)"
+WALK_SPEED = WandrRewardConfig.walk_speed
+"""m/s: the data's fastest walk (the speed columns count half-second windows faster than it)."""
 COLD_SIGMAS = {0.25: "σ = 0.25", 0.0: "z = 0, the prior's mean"}
 """Extra paced rows at a lower sampling temperature (z ~ N(0, σ² I)): sampling raises foot skating."""
 PAPER_ROWS = {  # WANDR Tables 1 and 2: SR %, FS %, DTG cm
@@ -110,7 +125,7 @@ VARIANTS = {  # weights file -> row label
     "wandr_wrist_pelvis.pt": "WANDR sampler, I^w + I^p",
     "wandr_wrist_orientation.pt": "WANDR sampler, I^w + I^r",
     "wandr_cmu_hdm05.pt": "WANDR sampler, trained on cmu + hdm05",
-    "wandr_clean.pt": "WANDR sampler, retrained on the cleaned data with the contact loss (priors/weights/clean/)",
+    "wandr_uncleaned.pt": "WANDR sampler, the previous prior (uncleaned CMU data, no contact loss)",
 }
 
 
@@ -183,8 +198,9 @@ def cached_prior(path: Path) -> torch.nn.Module:
 
 
 def run_shard(row: GridRow, first: int, last: int, seed: int) -> dict:
-    """Rollouts [first, last) of the row's grid: per-rollout reached, skated frames, frames and closest distance
-    (numpy), and the task's seconds. A pure function of its arguments (per-body noise: `BodyNoise`)."""
+    """Rollouts [first, last) of the row's grid: per-rollout reached, skated frames, frames, closest distance,
+    half-second windows of pelvis ground speed (how many, how many faster than `WALK_SPEED`, the fastest; numpy),
+    and the task's seconds. A pure function of its arguments (per-body noise: `BodyNoise`)."""
     from agents.controllers import PolicyLatent
 
     torch.manual_seed(seed)
@@ -202,18 +218,26 @@ def run_shard(row: GridRow, first: int, last: int, seed: int) -> dict:
         frames, noise = core.config.max_frames, BodyNoise(seed, bodies)
         initial = torch.stack([noise(len(bodies), core.prior.config.latent) for _ in range(frames)], dim=1)
         controller = LatentSequence(optimise_latents(core.stepper, start, frames, initial))
-    final = roll_out(core, start, controller)
+    track = [start.joints[:, PELVIS, :2]]
+    final = roll_out(core, start, controller, on_step=lambda state: track.append(state.joints[:, PELVIS, :2]))
+    speeds, inside = window_speeds(torch.stack(track, dim=1), final.frame, FPS)
+    peak = torch.where(inside, speeds, 0.0).amax(1) if speeds.shape[1] else torch.zeros(len(speeds))
     return {"reached": final.reached.numpy(), "skated": final.skated.numpy(), "frames": final.frame.numpy(),
-            "closest": final.closest.numpy(), "seconds": time.perf_counter() - began}  # fmt: skip
+            "closest": final.closest.numpy(), "windows": inside.sum(1).numpy(),
+            "fast": ((speeds > WALK_SPEED) & inside).sum(1).numpy(), "peak": peak.numpy(),
+            "seconds": time.perf_counter() - began}  # fmt: skip
 
 
 def merge_shards(parts: list[dict]) -> dict:
-    """One row's SR, FS and DTG (as `evaluate`) from its shards in order; seconds: their sum."""
+    """One row's SR, FS and DTG (as `evaluate`) from its shards in order; fast: % of half-second windows faster
+    than `WALK_SPEED`; peak: median over rollouts of the fastest half-second; seconds: their sum."""
     reached = torch.as_tensor(np.concatenate([part["reached"] for part in parts]))
     skated = float(np.concatenate([part["skated"] for part in parts]).sum())
     frames = int(np.concatenate([part["frames"] for part in parts]).sum())
     closest = np.concatenate([part["closest"] for part in parts])
+    windows, fast = (sum(int(part[key].sum()) for part in parts) for key in ("windows", "fast"))
     return {"SR": 100 * float(reached.float().mean()), "FS": 100 * skated / frames, "DTG": 100 * float(closest.mean()),
+            "fast": 100 * fast / max(windows, 1), "peak": float(np.median(np.concatenate([part["peak"] for part in parts]))),
             "reached": reached, "seconds": sum(part["seconds"] for part in parts), "frames": frames}  # fmt: skip
 
 
@@ -246,8 +270,9 @@ def training_clips() -> WandrClips | None:
     return None if dataset is None else WandrClips.from_dataset(dataset, "train", BodyModel(), mirrored=True)
 
 
-def data_skating(subsets: tuple[str, ...] = SHIPPED_SUBSETS) -> float | None:
-    """FS (%) of the test clips at 30 fps, or None when the mocap cache cannot be built here."""
+def data_figures(subsets: tuple[str, ...] = SHIPPED_SUBSETS) -> dict[str, float] | None:
+    """The test clips at 30 fps: FS (%), % of half-second windows faster than `WALK_SPEED` and the half-second
+    pelvis ground speeds' median, 95th percentile and maximum (m/s), or None when the mocap cache cannot be built here."""
     from motion_envs.body import BodyModel
     from motion_envs.body.markers import foot_vertex_ids
     from motion_envs.data.canonical import body_tensors
@@ -256,12 +281,18 @@ def data_skating(subsets: tuple[str, ...] = SHIPPED_SUBSETS) -> float | None:
     dataset = motion_30fps(subsets)
     if dataset is None:
         return None
-    body, ids, skated, frames = BodyModel(), foot_vertex_ids(), 0.0, 0
+    body, ids, skated, frames, speeds = BodyModel(), foot_vertex_ids(), 0.0, 0, []
     with torch.no_grad():
         for clip in dataset.clips("test"):
-            flags = foot_skating(body.skin(body(*body_tensors(clip)), ids))
+            tensors = body_tensors(clip)
+            flags = foot_skating(body.skin(body(*tensors), ids))
             skated, frames = skated + float(flags.sum()), frames + len(flags)
-    return 100 * skated / max(frames, 1)
+            clip_speeds, _ = window_speeds(tensors[0][None, :, :2], torch.tensor([len(flags)]), FPS)
+            speeds.append(clip_speeds.flatten())
+    speeds = torch.cat(speeds)
+    quantiles = torch.quantile(speeds, torch.tensor([0.5, 0.95, 1.0])).tolist()
+    return {"FS": 100 * skated / max(frames, 1), "fast": 100 * float((speeds > WALK_SPEED).float().mean()),
+            **dict(zip(("median", "p95", "max"), quantiles))}
 
 
 @torch.no_grad()
@@ -304,7 +335,8 @@ def figure(by_cell: dict[str, dict[str, np.ndarray]], path: Path, title: str) ->
 
 
 def table_row(label: str, row: dict) -> str:
-    return f"| {label} | {row['SR']:.1f} | {row['FS']:.1f} | {row['DTG']:.1f} | {row['seconds']:.0f} |"
+    return (f"| {label} | {row['SR']:.1f} | {row['FS']:.1f} | {row['DTG']:.1f} | {row['fast']:.1f} | {row['peak']:.2f} "
+            f"| {row['seconds']:.0f} |")
 
 
 def grid_rows(quick: bool = False, weights_dir: Path | None = None, policies: list[Path] | None = None,
@@ -342,12 +374,13 @@ def grid_rows(quick: bool = False, weights_dir: Path | None = None, policies: li
 
 def main(quick: bool = False, seed: int = 0, weights_dir: Path | None = None, policies: list[Path] | None = None,
          data_fs: bool = True, optimisation: bool = True, variants_dir: Path = VARIANTS_DIR, only: str | None = None,
-         ray_address: str | None = None) -> int:  # fmt: skip
+         ray_address: str | None = None, timing: bool = True) -> int:  # fmt: skip
     """Run every row, print the table, write the result files.
 
     only: rerun just the grid rows whose label contains this text and rewrite those rows of the existing
     table (e.g. a new policy, when the ablation weights of the last full run are not at hand).
-    ray_address: fan the rows' shards out over Ray (`benchmarks.fanout`: "local" or a cluster's address)."""
+    ray_address: fan the rows' shards out over Ray (`benchmarks.fanout`: "local" or a cluster's address).
+    timing: measure the prior's decode throughput (off on a busy machine; rows' seconds are printed either way)."""
     poses, samples = (2, 1) if quick else (6, 5)
     runs = grid_rows(quick, weights_dir, policies, optimisation, variants_dir, only)
     began = time.perf_counter()
@@ -367,8 +400,8 @@ def main(quick: bool = False, seed: int = 0, weights_dir: Path | None = None, po
                      f"Rows containing '{only}' rerun by `motion-envs bench wandr --only '{only}'`: {machine_line()}")  # fmt: skip
         return 0
     main_label = next(iter(by_cell))
-    data = data_skating() if data_fs else None
-    throughput = decode_throughput(WandrReachCore(WandrReachConfig(), prior=load_wandr(runs[main_label].prior)))
+    data = data_figures() if data_fs else None
+    throughput = decode_throughput(WandrReachCore(WandrReachConfig(), prior=load_wandr(runs[main_label].prior))) if timing else None
 
     count = len(rows[main_label]["reached"])
     lines = [f"# WANDR goal reaching{' (quick)' if quick else ''}", "",
@@ -376,27 +409,37 @@ def main(quick: bool = False, seed: int = 0, weights_dir: Path | None = None, po
              f"{DISTANCES} distances ({DISTANCE_RANGE[0]}-{DISTANCE_RANGE[1]} m) × {poses} start poses × {samples} samples, "
              f"≤ 240 frames (8 s) each, in batches of {SHARD} (`benchmarks.fanout`), run {where}: {wall:.0f} s in all. "
              f"`motion-envs bench wandr{' --quick' if quick else ''}`. Time per row: its batches' seconds, summed.",
-             machine_line(), "", "| row | SR (%) | FS (%) | DTG (cm) | time (s) |", "|---|---|---|---|---|"]  # fmt: skip
+             machine_line(), "", f"| row | SR (%) | FS (%) | DTG (cm) | ½-s windows > {WALK_SPEED:g} m/s (%) "
+             "| fastest ½ s, median (m/s) | time (s) |", "|---|---|---|---|---|---|---|"]  # fmt: skip
     for label, row in rows.items():
         lines.append(table_row(label, row))
     if data is not None:
-        lines.append(f"| data (cmu test clips) | | {data:.1f} | | |")
+        lines.append(f"| data (test clips) | | {data['FS']:.1f} | | {data['fast']:.1f} | | |")
     for label, (sr, fs, dtg) in PAPER_ROWS.items():
-        lines.append(f"| {label} | {sr} | {fs} | {dtg} | |")
+        lines.append(f"| {label} | {sr} | {fs} | {dtg} | | | |")
     angles, heights, distances = grid_values()
     for label, cell_rates in by_cell.items():
         lines += ["", f"SR (%) of '{label}' by goal height (m), angle and distance (m), as the paper's Figure 5:", ""]
         for axis, values in (("height", heights), ("angle (°)", torch.rad2deg(angles)), ("distance", distances)):
             key = axis.split()[0]
             lines.append(f"- {axis}: " + ", ".join(f"{v:.2f}: {s:.0f}" for v, s in zip(values.tolist(), cell_rates[key])))
-    lines += ["", f"Prior decode throughput at batch 1,024: {throughput['prior']:,.0f} body-frames/s (decode, integrate, FK); "
-              f"env core step {throughput['env']:,.0f} body-frames/s (adds feet, rewards, goals).", ""]  # fmt: skip
+    if data is not None:
+        lines += ["", f"Pelvis ground speed over half-second windows of the test clips: median {data['median']:.2f} m/s, "
+                  f"95th percentile {data['p95']:.2f}, fastest {data['max']:.2f}; they include ACCAD's runs (the issue measured "
+                  f"CMU's test walks never passing {WALK_SPEED:g} m/s). The speed columns are over every half-second "
+                  "span of a rollout before it ends."]
+    if throughput is not None:
+        lines += ["", f"Prior decode throughput at batch 1,024: {throughput['prior']:,.0f} body-frames/s (decode, integrate, FK); "
+                  f"env core step {throughput['env']:,.0f} body-frames/s (adds feet, rewards, goals)."]  # fmt: skip
+    else:
+        lines += ["", "Run with --no-timing (a busy machine): no throughput measured; the rows' seconds are not speed figures."]
+    lines.append("")
     text = "\n".join(lines)
     print(text)
     RESULTS.mkdir(exist_ok=True)
     atomic_write(RESULTS / f"{name}.md", lambda file: file.write(text.encode()))
     figure(by_cell, RESULTS / f"{name}.png", f"WANDR sampler: success by goal position ({count} rollouts)")
-    if not quick:
+    if not quick and throughput is not None:
         replace_section(RESULTS / "throughput.md", "\n".join([
             "## WANDR prior decode", "", machine_line(), "",
             "| batch | prior step (body-frames/s) | env core step (body-frames/s) | target |", "|---|---|---|---|",

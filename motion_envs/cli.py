@@ -81,7 +81,7 @@ def _bench_wandr(args: argparse.Namespace) -> int:
     from benchmarks.wandr_grid import main as wandr_grid
 
     return wandr_grid(quick=args.quick, seed=args.seed, data_fs=not args.no_data_fs, optimisation=not args.no_optimisation,
-                      variants_dir=args.variants_dir, only=args.only, ray_address=args.ray)  # fmt: skip
+                      variants_dir=args.variants_dir, only=args.only, ray_address=args.ray, timing=not args.no_timing)  # fmt: skip
 
 
 def _bench_wandr_pace(args: argparse.Namespace) -> int:
@@ -583,6 +583,8 @@ def parser() -> argparse.ArgumentParser:
     bench_wandr.add_argument("--seed", type=int, default=0)
     bench_wandr.add_argument("--no-data-fs", action="store_true", help="skip the data's FS row (needs the mocap folder)")
     bench_wandr.add_argument("--no-optimisation", action="store_true", help="skip the latent-optimisation rows (slowest)")
+    bench_wandr.add_argument("--no-timing", action="store_true",
+                             help="leave out the decode throughput (and throughput.md's section): a busy machine")
     bench_wandr.add_argument("--variants-dir", type=Path, default=Path("runs/wandr_weights"),
                              help="ablation / data-variant weights to add as rows (not shipped)")
     bench_wandr.add_argument("--only", default=None,

@@ -134,3 +134,20 @@ def stance_ankle_speed(ankles: torch.Tensor, fps: float) -> torch.Tensor:
     step = (ankles[1:, :, :2] - ankles[:-1, :, :2]).norm(dim=-1) * fps  # (T-1, 2)
     stance = step.gather(-1, lower[:-1, None]).squeeze(-1)[same]
     return stance.median() if len(stance) else torch.tensor(float("nan"))
+
+
+def window_speeds(track: torch.Tensor, frames: torch.Tensor, fps: float, seconds: float = 0.5) -> tuple[torch.Tensor, torch.Tensor]:
+    """Ground speeds (m/s) over every span of `seconds` of pelvis tracks, and which spans lie within each track.
+
+    track: (N, T + 1, 2) pelvis ground positions, frame 0 to T (a body that ended early keeps its last one);
+    frames: (N,) frames each body moved (its spans end at or before it).
+    Returns speeds (N, S) with S = T + 1 − round(seconds · fps) (S ≥ 0) and a bool mask (N, S), True for spans
+    inside the body's frames.
+    """
+    window = round(seconds * fps)
+    if track.shape[1] <= window:
+        empty = track.new_zeros(len(track), 0)
+        return empty, empty.bool()
+    speeds = (track[:, window:] - track[:, :-window]).norm(dim=-1) / (window / fps)
+    ends = torch.arange(window, track.shape[1], device=track.device)
+    return speeds, ends[None] <= frames[:, None].to(track.device)

@@ -147,7 +147,7 @@ def assert_same_rows(theirs: dict, ours: dict) -> None:
     assert theirs.keys() == ours.keys()
     for label in ours:
         assert torch.equal(theirs[label]["reached"], ours[label]["reached"]), label
-        for figure in ("SR", "FS", "DTG", "frames"):
+        for figure in ("SR", "FS", "DTG", "fast", "peak", "frames"):
             assert theirs[label][figure] == ours[label][figure], (label, figure)
 
 

@@ -44,16 +44,19 @@ def test_finished_stages_are_skipped_and_shipped_with_their_record(tmp_path, mon
 
 
 def test_the_clean_priors_load_in_their_envs_and_record_their_data():
-    """The retrained priors ship beside the defaults (priors/weights/clean/) and run where envs are told to
-    load them; each has a manifest record naming its data cache and command."""
+    """The retrained priors whose agents are not yet retrained ship beside the defaults (priors/weights/clean/) and
+    run where envs are told to load them; each has a manifest record naming its data cache and command. WANDR's
+    clean prior is the default now, its record naming the prior it replaced."""
     import gymnasium as gym
     import numpy as np
 
     import motion_envs  # noqa: F401  (registers the ids)
-    from motion_envs.priors.training import CLEAN_WEIGHTS_DIR
+    from motion_envs.priors.training import CLEAN_WEIGHTS_DIR, WEIGHTS_DIR
 
+    default = json.loads((WEIGHTS_DIR / "manifest.json").read_text())["wandr.pt"]
+    assert "--prior-init" in default["command"] and "train wandr" in default["replaces"]["command"]
     manifest = json.loads((CLEAN_WEIGHTS_DIR / "manifest.json").read_text())
-    options = {"wandr.pt": ("motion_envs/WandrReach-v0", "weights"), "clops.pt": ("motion_envs/ClopsNav-v0", "weights"),
+    options = {"clops.pt": ("motion_envs/ClopsNav-v0", "weights"),
                "gamma_predictor_2f.pt": ("motion_envs/GammaReach-v0", "weights_dir")}  # fmt: skip
     for name, (env_id, option) in options.items():
         assert manifest[name]["data_hash"].startswith("motion_") and "train" in manifest[name]["command"]

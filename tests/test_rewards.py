@@ -1,4 +1,4 @@
-"""GAMMA's reward terms and contact score against hand-computed values."""
+"""Reward terms (GAMMA's, WandrReach's speed term), the contact score and window speeds against hand-computed values."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import math
 import pytest
 import torch
 
-from motion_envs.metrics import contact_score, marker_speeds
+from motion_envs.metrics import contact_score, marker_speeds, window_speeds
 from motion_envs.body.canonical_frame import LEFT_HIP, PELVIS, RIGHT_HIP
 from motion_envs.rewards import (
     RewardConfig,
@@ -16,6 +16,7 @@ from motion_envs.rewards import (
     goal_absorbing_reward,
     goal_reward,
     orientation_reward,
+    overspeed,
     path_reward,
     pose_prior_reward,
 )
@@ -108,3 +109,22 @@ def test_reward_specs_change_named_fields_and_refuse_unknown_ones():
         RewardConfig.named("paper:speed=1")
     with pytest.raises(ValueError, match="unknown reward config 'papers'"):
         RewardConfig.named("papers")
+
+
+def test_overspeed_counts_only_ground_speed_above_the_limit():
+    before = torch.zeros(3, 3)
+    after = torch.tensor([[0.05, 0.0, 0.0], [0.1, 0.0, 0.5], [0.0, 0.2, 0.0]])  # 1.5, 3 (and a jump), 6 m/s at 30 fps
+    assert torch.allclose(overspeed(before, after, fps=30, limit=2.1), torch.tensor([0.0, 0.9, 3.9]), atol=1e-5)
+
+
+def test_window_speeds_over_half_seconds_inside_each_track():
+    frames = torch.arange(31, dtype=torch.float32)
+    walk = torch.stack([frames * 0.04, torch.zeros(31)], -1)  # 1.2 m/s for 30 frames
+    run = torch.stack([frames.clamp(max=20) * 0.1, torch.zeros(31)], -1)  # 3 m/s, stopped after 20 frames
+    speeds, inside = window_speeds(torch.stack([walk, run]), torch.tensor([30, 20]), fps=30)
+    assert speeds.shape == inside.shape == (2, 16)
+    assert torch.allclose(speeds[0], torch.full((16,), 1.2), atol=1e-5)
+    assert torch.allclose(speeds[1, :6], torch.full((6,), 3.0), atol=1e-5)  # spans ending at frames 15..20
+    assert inside[0].all() and inside[1].sum() == 6
+    empty, none = window_speeds(torch.zeros(1, 10, 2), torch.tensor([9]), fps=30)
+    assert empty.shape == none.shape == (1, 0)

@@ -113,7 +113,7 @@ def test_env_spaces_check_env_and_bad_input(shipped):
     with pytest.raises(TypeError, match="unknown arguments"):
         gym.make(ENV_ID, prior=shipped, goal_radius=0.2)
     _, reward, _, _, info = env.step(np.zeros(64, dtype=np.float32))
-    assert set(info["reward_terms"]) == {"progress", "success", "skating", "latent"} and np.isfinite(reward)
+    assert set(info["reward_terms"]) == {"progress", "success", "skating", "speeding", "latent"} and np.isfinite(reward)
 
 
 def test_vector_env_matches_single_envs(shipped):
@@ -185,14 +185,16 @@ def test_latent_optimisation_brings_the_wrist_closer(shipped):
     torch.manual_seed(0)
     core = WandrReachCore(WandrReachConfig(max_frames=10), shipped)
     state = core.initial_state(torch.tensor([0, 1]), torch.zeros(2), torch.zeros(2, 1, 3))
-    goal = state.joints[:, RIGHT_WRIST] + torch.tensor([0.0, 0.4, 0.1])
+    # 0.83 m ahead and up: the shipped (clean) prior's mean latent alone ends 26-29 cm short after 10 frames,
+    # optimised 2 cm (0.4 m ahead it came within 11-13 cm on its own, leaving the optimisation little to show).
+    goal = state.joints[:, RIGHT_WRIST] + torch.tensor([0.0, 0.8, 0.2])
     state = core.initial_state(torch.tensor([0, 1]), torch.zeros(2), goal[:, None])
     initial = torch.zeros(2, 10, 64)
     settings = LatentOptimisationSettings(steps=15, learning_rate=0.1)
     latents = optimise_latents(core.stepper, state, 10, initial, settings)
     before = roll_out(core, state, LatentSequence(initial))
     after = roll_out(core, state, LatentSequence(latents))
-    assert (after.distance < before.distance - 0.05).all()
+    assert (after.distance < before.distance - 0.1).all()
     with pytest.raises(ValueError, match="initial latents"):
         optimise_latents(core.stepper, state, 5, initial, settings)
 

@@ -160,21 +160,11 @@ def run_search(core: GammaReachCore, start: GammaReachState, proposal: Controlle
     return recorder.row(found.length, found.reached, found.spread)
 
 
-@torch.no_grad()
 def run_bodies(core: GammaReachCore, start: GammaReachState, controller: Controller, clones: int) -> np.ndarray:
     """Per-body success: `clones` copies of every pair, each on its own until it reaches the goal or the horizon
-    (no clone's arrival stops another). Returns (pairs, clones) bool."""
-    state = start.repeat(clones)  # clones of a pair are adjacent rows
-    reached = torch.zeros(state.num_bodies, dtype=torch.bool)
-    live = torch.arange(state.num_bodies)
-    for _ in tqdm(range(core.config.max_primitives), desc="primitives, per body", leave=False):
-        state, result = core.step(state, controller(core, state))
-        arrived = result.reached.cpu()
-        reached[live[arrived]] = True
-        if arrived.all():
-            break
-        state, live = state.index((~arrived).to(state.steps.device)), live[~arrived]
-    return reached.reshape(start.num_bodies, clones).numpy()
+    (`run_clones` with every copy a pair of one clone, so no clone's arrival stops another). Returns (pairs, clones)
+    bool."""
+    return run_clones(core, start.repeat(clones), controller, 1)["reached"].reshape(start.num_bodies, clones)
 
 
 DIRECTIONS = {"ahead (< 60°)": (0.0, 60.0), "side (60–120°)": (60.0, 120.0), "behind (> 120°)": (120.0, 180.01)}

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -123,7 +125,9 @@ def _table_scene() -> Scene:
 def test_the_search_prunes_branches_that_walk_into_a_table(gamma):
     """The goal lies straight across a table. Half of each node's children follow the GammaReach policy (which walks
     straight at it, through the table), half are random latents: with the collision term the chosen branches avoid
-    the table; ranked by distance alone they walk into it."""
+    the table; ranked by distance alone (no collision or clearance term) they walk into it. Collisions are counted on the branches as searched
+    (`found.collisions`): replayed one body at a time, a branch is not bit-identical to its search in a batch
+    of 64 (bf16 kernels on AMX CPUs sum differently per batch size), and near the table that can tip a contact."""
     from agents.controllers import PolicyLatent
     from motion_envs.priors.training import WEIGHTS_DIR
 
@@ -133,22 +137,22 @@ def test_the_search_prunes_branches_that_walk_into_a_table(gamma):
                                [np.array([[5.4, 2.0]])], torch.tensor([slot]))  # fmt: skip
     policy = PolicyLatent(WEIGHTS_DIR / "ppo_gammareach_alpha1_paper.zip", deterministic=True)
     collisions = {}
-    for pruning in (1000.0, 0.0):
-        collisions[pruning] = 0
-        for seed in range(4):
+    for scene_terms in (True, False):
+        collisions[scene_terms] = 0
+        for seed in range(8):
             random = RandomLatent(seed)
 
             def half_policy(core, state):
                 straight, other = policy(core, state), random(core, state)
                 return torch.where((torch.arange(len(straight)) % 2 == 0)[:, None], straight, other)
 
-            cost = SearchCost(ground=0.0, skate=0.0, orientation=0.0, distance=1.0, collision=pruning)
+            cost = SearchCost.distance_only()
+            if not scene_terms:
+                cost = dataclasses.replace(cost, collision=0.0, clearance=0.0)
             found = beam_search(core, start, half_policy, SearchSettings(roots=16, children=4, keep=4, max_depth=8, cost=cost))
-            state = start
-            for z in found.latents[0, : int(found.length[0])]:
-                state, result = core.step(state, z[None])
-                collisions[pruning] += int(result.collided[0])
-    assert collisions[0.0] >= 8 and collisions[1000.0] <= collisions[0.0] / 4, collisions
+            collisions[scene_terms] += int(found.collisions[0])
+    # measured (8 searches of 8 primitives): with the scene terms 0 (fp32) and 3 (bf16, AMX Xeon), without 32
+    assert collisions[False] >= 16 and collisions[True] <= collisions[False] / 4, collisions
 
 
 def test_populate_end_to_end_writes_a_rollout_a_video_and_views_from_above(tmp_path):

@@ -203,8 +203,9 @@ class GammaWanderState(BatchedState):
 @dataclasses.dataclass(frozen=True)
 class GammaWanderStepResult:
     """One step of N bodies; every tensor (N,). distance: metres left along the path. reached: the last waypoint
-    reached. penetration: the deepest body sphere in the scene over the primitive's frames (m); collided: deeper
-    than the tolerance. crowding: how far (m) the pelvis came inside `PERSONAL_SPACE` of a neighbour."""
+    reached. clearance: the least signed distance (m) of a body sphere's surface to the scene over the primitive's
+    frames (negative inside; +inf on open ground); penetration: the deepest sphere, max(-clearance, 0); collided:
+    deeper than the tolerance. crowding: how far (m) the pelvis came inside `PERSONAL_SPACE` of a neighbour."""
 
     reward: torch.Tensor
     terms: dict[str, torch.Tensor]
@@ -213,6 +214,7 @@ class GammaWanderStepResult:
     reached: torch.Tensor
     terminated: torch.Tensor
     truncated: torch.Tensor
+    clearance: torch.Tensor
     penetration: torch.Tensor
     collided: torch.Tensor
     crowding: torch.Tensor
@@ -360,7 +362,8 @@ class GammaWanderCore:
         reach = dataclasses.replace(reach, goal=torch.cat([goal_xy, torch.zeros_like(goal_xy[:, :1])], dim=1),
                                     closest=torch.where(advance, waypoint_distance, reach.closest),
                                     goal_paid=torch.where(advance, torch.zeros_like(reach.goal_paid), reach.goal_paid))  # fmt: skip
-        penetration = self.penetration(moved.primitive.joints, state.scene)
+        clearance = self.clearance(moved.primitive.joints, state.scene)
+        penetration = (-clearance).clamp(min=0.0)
         collided = penetration > config.collision_tolerance
         crowding = crowding_depth(moved.primitive.joints[:, :, PELVIS, :2], state.neighbours)
         remaining = (config.max_primitives - reach.steps).to(moved.reward.dtype)
@@ -370,20 +373,21 @@ class GammaWanderCore:
         truncated = (reach.steps >= config.max_primitives) & ~reached
         next_state = dataclasses.replace(state, reach=reach, current=current, collisions=state.collisions + collided.long())
         result = GammaWanderStepResult(reward, terms, next_state.distance_left(pelvis), waypoint_distance, reached, reached,
-                                       truncated, penetration, collided, crowding, moved.contact_score, moved.primitive)  # fmt: skip
+                                       truncated, clearance, penetration, collided, crowding, moved.contact_score,
+                                       moved.primitive)  # fmt: skip
         return next_state, result
 
-    def penetration(self, joints: torch.Tensor, scene: torch.Tensor) -> torch.Tensor:
-        """(N,) deepest penetration (m, 0 when clear) of the collision spheres of bodies with joints (N, T, 22, 3)
-        into their scenes over all T frames; one signed-distance lookup per scene."""
+    def clearance(self, joints: torch.Tensor, scene: torch.Tensor) -> torch.Tensor:
+        """(N,) least signed distance (m; negative: inside) from the collision spheres of bodies with joints
+        (N, T, 22, 3) to their scenes over all T frames, +inf on open ground; one signed-distance lookup per scene."""
         centres, radii = spheres_of_joints(joints)
-        depth = torch.zeros(len(joints), device=joints.device)
+        clearance = torch.full((len(joints),), float("inf"), device=joints.device)
         for slot in torch.unique(scene).tolist():
             if slot < 0:
                 continue
             rows = torch.nonzero(scene == slot).flatten()
-            depth[rows] = self.scenes[slot].collisions(centres[rows], radii).flatten(1).amax(dim=1)
-        return depth
+            clearance[rows] = self.scenes[slot].clearance(centres[rows], radii).flatten(1).amin(dim=1)
+        return clearance
 
     def render_inputs(self, state: GammaWanderState) -> RenderInputs:
         return self.reach.render_inputs(state.reach)

@@ -105,7 +105,12 @@ class Scene:
 
     def collisions(self, points: torch.Tensor, radii: torch.Tensor) -> torch.Tensor:
         """Penetration (..., P) in metres (0 where clear) of spheres at `points` (..., P, 3) with `radii` (P,)."""
-        return (radii - self.grid.query(points)).clamp(min=0.0)
+        return (-self.clearance(points, radii)).clamp(min=0.0)
+
+    def clearance(self, points: torch.Tensor, radii: torch.Tensor) -> torch.Tensor:
+        """Signed distance (..., P) in metres from the surfaces of spheres at `points` (..., P, 3) with `radii` (P,)
+        to the scene: negative inside it, +inf outside the grid."""
+        return self.grid.query(points) - radii
 
 
 def load_scene(path: str | Path, name: str | None = None) -> Scene:

@@ -5,8 +5,11 @@ policy samples or random z); then, level by level, the `keep` cheapest
 children survive and each gets `children` children of its own, until a kept
 node reaches the goal or `max_depth` levels are done. The chosen branch (the
 cheapest node that reached the goal, else the cheapest at the last level) is
-returned as its latent codes, which replay to exactly the searched motion
-because the prior is deterministic given z. Defaults follow the authors'
+returned as its latent codes, with the branch's scene collisions as the search
+saw them. The prior is deterministic given z, but a replay in another batch
+shape is not bit-identical to the search (matmul kernels sum in a different
+order per batch size, by far the most in bf16), so a replayed branch can drift
+from the searched motion by a few centimetres over many primitives. Defaults follow the authors'
 release (REFERENCE_NOTES §1.8): 16 roots, 4 children per node, 4 kept.
 
 Node cost (lower is better; the release's soft-contact cost, weights in
@@ -15,10 +18,13 @@ Node cost (lower is better; the release's soft-contact cost, weights in
     w_ground · max(|min z of any marker| − 0.05, 0) + w_skate · max(slowest marker speed − 0.075, 0)
     + w_orientation · (1 − cos(facing, direction to goal)) + w_distance · (pelvis-goal distance)
     + w_collision · [a body sphere entered the scene] + w_crowd · (metres inside another body's space)
+    + w_clearance · max(margin − clearance, 0)
 
-The last two terms need results that report them (`GammaWander-v0`'s `collided` and `crowding`); the
-collision weight is large, so a branch that walks into furniture or a wall is pruned unless every branch
-does (ours; the release's scene search has the same rule as a hard check).
+The scene terms need results that report them (`GammaWander-v0`'s `collided`, `crowding` and `clearance`);
+the collision weight is large, so a branch that walks into furniture or a wall is pruned unless every branch
+does (ours; the release's scene search has the same rule as a hard check). The clearance term (ours) keeps
+branches a margin away from furniture: ranked by distance alone, a search hugs the furniture it walks around,
+until every child of its kept nodes touches it and the pruning has nothing left to choose.
 
 ## What an environment must offer (the batched clone/restore API)
 
@@ -32,8 +38,8 @@ does (ours; the release's scene search has the same rule as a hard check).
   world coordinates (z up);
 - `core.config.max_primitives` for the default depth and
   `core.generator.latent_size`;
-- optionally, results with `collided` (N,) bool and `crowding` (N,) metres, and states with `collisions` (N,)
-  so far (`SearchCost`'s scene terms).
+- optionally, results with `collided` (N,) bool, `crowding` (N,) and `clearance` (N,) metres, and states with
+  `collisions` (N,) so far (`SearchCost`'s scene terms).
 
 `GammaReachCore` offers all of it; `TreeSearch` wraps a single env whose
 `unwrapped` has `core` and a settable `state` (e.g. `GammaReach-v0`).
@@ -73,6 +79,9 @@ class SearchCost:
     """Added per collision of a node's branch with the scene (results with `collided`): such branches are pruned."""
     crowd: float = 10.0
     """Per metre a pelvis came inside another body's personal space (results with `crowding`)."""
+    clearance: float = 10.0
+    """Per metre a body sphere came inside `clearance_margin` of the scene (results with `clearance`)."""
+    clearance_margin: float = 0.1
 
     @classmethod
     def distance_only(cls) -> SearchCost:
@@ -94,6 +103,8 @@ class SearchCost:
         if hasattr(result, "collided"):  # with the branch's earlier collisions (`state.collisions`): pruned for good
             collisions = state.collisions.to(cost.dtype) + result.collided.to(cost.dtype)
             cost = cost + self.collision * collisions + self.crowd * result.crowding
+        if hasattr(result, "clearance"):
+            cost = cost + self.clearance * (self.clearance_margin - result.clearance).clamp_min(0.0)
         return cost
 
 
@@ -116,7 +127,8 @@ class SearchResult:
     """B searches' chosen branches. latents: (B, D, latent), zero after a branch's end. length: (B,) primitives.
     reached: (B,) bool. cost: (B,) the chosen last node's cost. spread: (B,) mean pelvis-goal ground distance
     of the nodes kept at the last level (GAMMA's "avg. dist." of a top-K search). expanded: body-primitives
-    generated in all."""
+    generated in all. collisions: (B,) long, the chosen branch's primitives that collided with the scene as
+    searched (zeros where states have no `collisions`)."""
 
     latents: torch.Tensor
     length: torch.Tensor
@@ -124,6 +136,7 @@ class SearchResult:
     cost: torch.Tensor
     spread: torch.Tensor
     expanded: int
+    collisions: torch.Tensor
 
 
 @torch.no_grad()
@@ -138,6 +151,7 @@ def beam_search(core: Any, start: BatchedState, proposal: Proposal, settings: Se
     last_level = torch.zeros(count, dtype=torch.long)
     reached = torch.zeros(count, dtype=torch.bool)
     final_cost, spread = torch.zeros(count), torch.zeros(count)
+    collisions = torch.zeros(count, dtype=torch.long)
     expanded = 0
     for level in range(depth_limit):
         repeats = settings.roots if level == 0 else settings.children
@@ -156,6 +170,8 @@ def beam_search(core: Any, start: BatchedState, proposal: Proposal, settings: Se
         ended = live[finished]
         last_level[ended], reached[ended], final_cost[ended] = level, best_done[finished], best_cost[finished]
         spread[ended] = result.distance.cpu().reshape(len(live), -1)[rows, kept].mean(dim=1)[finished]
+        if hasattr(next_state, "collisions"):
+            collisions[ended] = next_state.collisions.cpu().reshape(len(live), -1)[rows, kept[:, :1]][finished, 0].long()
         if finished.all():
             break
         going = torch.nonzero(~finished).flatten()
@@ -163,7 +179,7 @@ def beam_search(core: Any, start: BatchedState, proposal: Proposal, settings: Se
         flat_rows = (going[:, None] * cost.shape[1] + kept[going]).flatten()
         parents = next_state.index(flat_rows.to(result.distance.device))
     latents = _backtrack(history, last_level, count, latent_size)
-    return SearchResult(latents, last_level + 1, reached, final_cost, spread, expanded)
+    return SearchResult(latents, last_level + 1, reached, final_cost, spread, expanded, collisions)
 
 
 def _backtrack(history: list, last_level: torch.Tensor, count: int, latent_size: int) -> torch.Tensor:

@@ -6,6 +6,13 @@ the KL averaged over latent dimensions and the minibatch (the authors'
 release, REFERENCE_NOTES §1.6). The regulariser keeps the policy's latents
 where the motion prior was trained, so the motion stays natural.
 
+`prior_mean="cloned"` (ours) keeps Ψ and α but centres the unit Gaussian on
+the cloned policy's mean for the same observation, N(μ_cloned(s), I): the
+data's own walking latents given the goal. On our CMU-trained prior z = 0
+stands still (random z ~ N(0, I) moves the pelvis at 0.23 m/s, the data at
+1.32), so the paper's form at α = 10 pulls the policy towards standing; the
+paper means the term to keep motion realistic, which the data's latents are.
+
 How it joins SB3's loss without copying `PPO.train`: `LatentPriorPolicy`
 keeps the action distribution of its latest forward pass, and during
 `train()` the optimiser's `zero_grad` is followed by the backward pass of
@@ -69,32 +76,44 @@ class LatentPriorPolicy(ActorCriticPolicy):
         self.last_distribution = distribution
         return distribution
 
-    def prior_kl(self) -> torch.Tensor:
-        """Mean over dims and batch of KL(π(z|s) ‖ N(0, I)) for the latest forward pass."""
+    def prior_kl(self, centred_on_anchor: bool = False) -> torch.Tensor:
+        """Mean over dims and batch of KL(π(z|s) ‖ N(0, I)) for the latest forward pass; `centred_on_anchor`:
+        KL(π(z|s) ‖ N(μ_anchor(s), I)) for the latest `evaluate_actions`."""
         normal = self.last_distribution.distribution
-        return kl_to_standard_normal(normal.loc, 2.0 * normal.scale.log()).mean()
+        mean = normal.loc - self.anchor_mean() if centred_on_anchor else normal.loc
+        return kl_to_standard_normal(mean, 2.0 * normal.scale.log()).mean()
 
     def anchor_kl(self) -> torch.Tensor:
         """Mean over dims and batch of KL(π(z|s) ‖ N(μ_anchor(s), σ²)) for the latest `evaluate_actions`."""
         normal = self.last_distribution.distribution
+        return ((normal.loc - self.anchor_mean()).pow(2) / (2.0 * normal.scale.detach().pow(2))).mean()
+
+    def anchor_mean(self) -> torch.Tensor:
+        """(batch, latent) the frozen anchor's mean for the observations of the latest `evaluate_actions`."""
         with torch.no_grad():
-            anchor_mean = self.anchor(self.extract_features(self.last_observation, self.pi_features_extractor))
-        return ((normal.loc - anchor_mean).pow(2) / (2.0 * normal.scale.detach().pow(2))).mean()
+            return self.anchor(self.extract_features(self.last_observation, self.pi_features_extractor))
+
+
+PRIOR_MEANS = ("zero", "cloned")
 
 
 class PPOKL(PPO):
     """PPO + α Ψ(KL(π ‖ N(0, I))) [+ β KL(π ‖ anchor)]. `kl_prior_coef` is α (paper: 1 or 10); `anchor_coef`
     is β (0: the paper's loss; > 0 also holds the actor near its anchor, see `LatentPriorPolicy.set_anchor`);
-    other arguments are SB3's PPO's, with the paper's settings (`PAPER_SETTINGS`) where not given."""
+    `prior_mean` "zero" (the paper's N(0, I)) or "cloned" (N(μ_anchor(s), I), see the module docstring; the
+    anchor is set after cloning); other arguments are SB3's PPO's, with the paper's settings
+    (`PAPER_SETTINGS`) where not given."""
 
     policy_aliases = {"MlpPolicy": LatentPriorPolicy}
 
     def __init__(self, policy: str | type[LatentPriorPolicy], env: Any, kl_prior_coef: float = 10.0,
-                 anchor_coef: float = 0.0, **kwargs: Any) -> None:  # fmt: skip
+                 anchor_coef: float = 0.0, prior_mean: str = "zero", **kwargs: Any) -> None:  # fmt: skip
         if kl_prior_coef < 0 or anchor_coef < 0:
             raise ValueError(f"kl_prior_coef and anchor_coef must be >= 0, got {kl_prior_coef} and {anchor_coef}")
-        self.kl_prior_coef, self.anchor_coef = kl_prior_coef, anchor_coef
-        if anchor_coef > 0:
+        if prior_mean not in PRIOR_MEANS:
+            raise ValueError(f"prior_mean must be one of {PRIOR_MEANS}, got {prior_mean!r}")
+        self.kl_prior_coef, self.anchor_coef, self.prior_mean = kl_prior_coef, anchor_coef, prior_mean
+        if anchor_coef > 0 or prior_mean == "cloned":
             kwargs["policy_kwargs"] = {**kwargs.get("policy_kwargs", {}), "anchored": True}
         super().__init__(policy, env, **{**PAPER_SETTINGS, **kwargs})
 
@@ -106,7 +125,7 @@ class PPOKL(PPO):
 
         def zero_grad_then_regularise(set_to_none: bool = True) -> None:
             plain_zero_grad(set_to_none=set_to_none)
-            kl = self.policy.prior_kl()
+            kl = self.policy.prior_kl(centred_on_anchor=self.prior_mean == "cloned")
             values.append(float(kl.detach()))
             regulariser = self.kl_prior_coef * robust_kl(kl)
             if self.anchor_coef > 0:

@@ -32,7 +32,7 @@ from stable_baselines3.common.vec_env import VecMonitor, VecNormalize  # noqa: E
 
 from agents.behaviour_cloning import clone_latents, posterior_latents  # noqa: E402
 from agents.policy_files import TrainedFor  # noqa: E402
-from agents.ppo_kl import PAPER_SETTINGS, PPOKL  # noqa: E402
+from agents.ppo_kl import PAPER_SETTINGS, PPOKL, PRIOR_MEANS  # noqa: E402
 from agents.vec_env import NativeVecEnv  # noqa: E402
 from motion_envs.atomic import atomic_write  # noqa: E402
 from motion_envs.data.goal_windows import GoalWindows  # noqa: E402
@@ -79,6 +79,9 @@ class PPOTrainConfig:
     """SB3's γ·V(s) at time-limit ends; off: the paper's Monte-Carlo returns (see `NativeVecEnv`)."""
     anchor: float = 0.0
     """β of KL(π ‖ the cloned policy) added to the loss (`PPOKL.anchor_coef`); 0: the paper's loss."""
+    kl_mean: str = "zero"
+    """Centre of the α Ψ(KL) regulariser: "zero" (the paper's N(0, I)) or "cloned" (N(μ_cloned(s), I), ours;
+    `PPOKL.prior_mean`)."""
     keep: str = "best"
     """"best": keep the checkpoint whose training-success window was best, a guard against late drift (before
     Monte-Carlo returns, runs went 0.23 -> 0.51 -> 0.09 over 230k steps); "last": the final one."""
@@ -123,6 +126,10 @@ class PPOTrainConfig:
             raise ValueError(f"keep must be 'best' or 'last', got {self.keep!r}")
         if self.anchor > 0 and self.init != "data":
             raise ValueError("anchor > 0 holds the policy near its cloned start: it needs init='data'")
+        if self.kl_mean not in PRIOR_MEANS:
+            raise ValueError(f"kl_mean must be one of {PRIOR_MEANS}, got {self.kl_mean!r}")
+        if self.kl_mean == "cloned" and (self.init != "data" or self.engine != "sb3"):
+            raise ValueError("kl_mean='cloned' centres the regulariser on the cloned policy: it needs init='data' and engine sb3")
 
     def checkpoint_path(self) -> Path:
         """What a resumed run continues from: SB3's model.zip, or RLlib's checkpoint folder."""
@@ -133,7 +140,9 @@ class PPOTrainConfig:
         if self.reward is None:
             return weights_destination(f"ppo_{name}_{self.engine}.zip", self.run_dir, self.weights, self.ship)
         reward = self.reward.replace(":", "-").replace("=", "").replace(",", "-")  # "paper:goal=5" -> "paper-goal5"
-        return weights_destination(f"ppo_{name}_alpha{self.alpha:g}_{reward}.zip", self.run_dir, self.weights, self.ship)
+        cloned = "_cloned" if self.kl_mean == "cloned" else ""
+        return weights_destination(f"ppo_{name}_alpha{self.alpha:g}_{reward}{cloned}.zip", self.run_dir, self.weights,
+                                   self.ship)  # fmt: skip
 
 
 class CurveCallback(BaseCallback):
@@ -220,7 +229,8 @@ def train_ppo(config: PPOTrainConfig, clone_from: GoalWindows | None = None) -> 
 def new_model(config: PPOTrainConfig, venv: Any) -> PPOKL:
     """A new PPOKL model with the run's settings (two hidden layers of `net_width` for actor and critic)."""
     width = config.net_width
-    return PPOKL("MlpPolicy", venv, kl_prior_coef=config.alpha, anchor_coef=config.anchor, n_steps=config.n_steps,
+    return PPOKL("MlpPolicy", venv, kl_prior_coef=config.alpha, anchor_coef=config.anchor, prior_mean=config.kl_mean,
+                 n_steps=config.n_steps,
                  batch_size=config.batch_size, n_epochs=config.n_epochs, learning_rate=config.learning_rate,
                  seed=config.seed, device=config.device, tensorboard_log=str(config.run_dir / "tensorboard"),
                  policy_kwargs={"net_arch": {"pi": [width, width], "vf": [width, width]},
@@ -234,7 +244,7 @@ def clone_into(model: PPOKL, clone_from: GoalWindows, config: PPOTrainConfig) ->
     latents = posterior_latents(generator.predictor_2f, clone_from)
     cloning = clone_latents(model.policy, clone_from.observation, latents, epochs=config.clone_epochs, seed=config.seed)
     print("cloned data latents: " + ", ".join(f"{k} {v:.4f}" for k, v in cloning.items()), file=sys.stderr)
-    if config.anchor > 0:
+    if config.anchor > 0 or config.kl_mean == "cloned":
         model.policy.set_anchor()
     atomic_write(config.run_dir / "cloning.json", lambda file: file.write(json.dumps(cloning).encode()))
     return cloning

@@ -225,7 +225,7 @@ def _train_ppo(args: argparse.Namespace) -> int:
     given = {"env_id": args.env, "reward": args.reward, "alpha": args.alpha, "num_envs": args.num_envs,
              "total_timesteps": args.timesteps, "run_dir": args.run_dir, "weights": args.weights, "seed": args.seed,
              "init": args.init, "log_std_init": args.log_std_init, "learning_rate": args.learning_rate,
-             "n_steps": args.n_steps, "anchor": args.anchor, "ship": args.ship or None, "device": args.device,
+             "n_steps": args.n_steps, "anchor": args.anchor, "kl_mean": args.kl_mean, "ship": args.ship or None, "device": args.device,
              "env_kwargs": _env_options(args) or None, "engine": args.engine, "env_runners": args.env_runners,
              "address": args.address, "cpus_per_env_runner": args.cpus_per_env_runner, "keep": args.keep}  # fmt: skip
     config = PPOTrainConfig(command="motion-envs " + " ".join(sys.argv[1:]),
@@ -520,6 +520,9 @@ def parser() -> argparse.ArgumentParser:
     train.add_argument("--learning-rate", type=float, default=None, help="ppo, dqn: Adam learning rate")
     train.add_argument("--n-steps", type=int, default=None, help="ppo: primitives per body per rollout")
     train.add_argument("--anchor", type=float, default=None, help="ppo: weight of KL to the cloned policy (default 0)")
+    train.add_argument("--kl-mean", choices=("zero", "cloned"), default=None,
+                       help="ppo: centre of the alpha-weighted KL: zero (the paper's N(0, I), default) or cloned "
+                            "(N(cloned policy's mean, I), ours; needs --init data)")  # fmt: skip
     train.add_argument("--keep", choices=("best", "last"), default=None,
                        help="ppo: ship the checkpoint of the best success window (default) or the last one")
     train.add_argument("--env-option", action="append", default=[], metavar="KEY=VALUE",

@@ -65,3 +65,28 @@ def test_a_saved_policy_drives_the_batched_core(venv, tmp_path):
     assert np.allclose(np.clip(mean.numpy(), -4, 4), expected, atol=1e-5)  # SB3's predict clips to the Box; the env does too
     sampled = PolicyLatent(tmp_path / "policy.zip", seed=1)(core, state)
     assert sampled.shape == (5, 128) and not torch.allclose(sampled, mean)
+
+
+def test_the_cloned_centre_pulls_towards_the_anchor_not_zero(venv):
+    """prior_mean="cloned": the same α Ψ(KL) centred on the anchor's mean (here an actor whose mean was moved to
+    z = 1 before `set_anchor`, standing in for a cloned one) keeps the policy there; from the same start the paper's
+    N(0, I) pulls it towards 0."""
+    venv.seed(0)
+    observations = torch.as_tensor(venv.reset())
+    means = {}
+    for prior_mean in ("zero", "cloned"):
+        model = PPOKL("MlpPolicy", venv, kl_prior_coef=100.0, prior_mean=prior_mean, n_steps=8, batch_size=32, n_epochs=4,
+                      learning_rate=3e-3, seed=0, device="cpu", target_kl=None)  # fmt: skip
+        with torch.no_grad():
+            model.policy.action_net.bias.fill_(1.0)
+        if prior_mean == "cloned":
+            model.policy.set_anchor()
+        model.learn(total_timesteps=128)
+        with torch.no_grad():
+            means[prior_mean] = float(model.policy.get_distribution(observations).distribution.loc.mean())
+    assert means["cloned"] > 0.8 and means["zero"] < 0.5, means
+
+
+def test_unknown_prior_mean_is_rejected(venv):
+    with pytest.raises(ValueError, match="prior_mean"):
+        PPOKL("MlpPolicy", venv, prior_mean="anchor")

@@ -228,6 +228,8 @@ class GammaRow:
     cost: str = "release"
     clones: int = 32
     precision: str = "auto"
+    weights_dir: str | None = None
+    """The prior's folder (None: the shipped one)."""
 
     def __post_init__(self) -> None:
         if self.controller not in CONTROLLERS:
@@ -235,16 +237,23 @@ class GammaRow:
 
 
 @functools.lru_cache(maxsize=4)
-def cached_core(precision: str, goal_cvae: bool) -> GammaReachCore:
+def cached_core(precision: str, goal_cvae: bool, weights_dir: str | None = None) -> GammaReachCore:
     """One env core per process and setting (cores are stateless between rollouts; loading the prior is not free)."""
-    core = GammaReachCore(GammaReachConfig(precision=precision))
-    return GammaReachCore(GammaReachConfig(), goal_cvae_generator(base=core.generator)) if goal_cvae else core
+    core = GammaReachCore(GammaReachConfig(precision=precision, weights_dir=weights_dir))
+    if not goal_cvae:
+        return core
+    return GammaReachCore(GammaReachConfig(weights_dir=weights_dir), goal_cvae_generator(g_cvae_weights(weights_dir), core.generator))
+
+
+def g_cvae_weights(weights_dir: str | None) -> Path:
+    """The g-CVAE baseline's weights in `weights_dir` (None: the shipped ones)."""
+    return G_CVAE_WEIGHTS if weights_dir is None else Path(weights_dir) / G_CVAE_WEIGHTS.name
 
 
 def run_shard(row: GammaRow, first: int, last: int, seed: int) -> dict:
     """Pairs [first, last) of the row (`Recorder.row`'s figures, plus the task's seconds)."""
     began = time.perf_counter()
-    core = cached_core(row.precision, row.controller == "g-cvae")
+    core = cached_core(row.precision, row.controller == "g-cvae", row.weights_dir)
     start = fixed_pairs(core, range(first, last), seed)
     shard_seed = group_seed(seed, first)
     proposal = PolicyLatent(row.policy, seed=shard_seed) if row.controller == "policy" else RandomLatent(shard_seed)
@@ -282,29 +291,33 @@ def table(rows: dict[str, dict], paper: dict[str, tuple] | None = None) -> list[
 
 def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False, bf16: bool = False,
          precision: str = "auto", output: str | None = None, ray_address: str | None = None,
-         policies: list[Path] | None = None) -> int:  # fmt: skip
+         policies: list[Path] | None = None, weights_dir: Path | None = None) -> int:  # fmt: skip
     """`precision`: the prior's networks for the main table; `output`: the results' file stem (default
     gamma_control[_quick]); `ray_address`: fan the pair groups out over Ray ("local" or a cluster's address);
-    `policies`: GammaReach policy files to evaluate in place of the shipped ones (e.g. one trained on RLlib)."""
+    `policies`: GammaReach policy files to evaluate in place of the shipped ones (e.g. one trained on RLlib);
+    `weights_dir`: a folder holding a GAMMA prior and its policies, used for both (default: the shipped ones)."""
     if quick:
         pairs, clones = 20, 8
     began, requested = time.perf_counter(), precision
-    core = cached_core(precision, False)
+    folder = None if weights_dir is None else str(weights_dir)
+    core = cached_core(precision, False, folder)
     start = fixed_pairs(core, pairs, seed)
     precision = core.generator.precision  # "auto" resolved here: every task, on whatever CPU, runs the same networks
-    runs: dict[str, GammaRow] = {"random z": GammaRow("random", clones=clones, precision=precision)}
-    if G_CVAE_WEIGHTS.exists():
-        runs["g-CVAE"] = GammaRow("g-cvae", clones=clones, precision=precision)
-    policies = ({policy_label(path): path for path in sorted(WEIGHTS_DIR.glob("ppo_gammareach_*.zip"))} if policies is None
+    row = functools.partial(GammaRow, precision=precision, weights_dir=folder)
+    runs: dict[str, GammaRow] = {"random z": row("random", clones=clones)}
+    if g_cvae_weights(folder).exists():
+        runs["g-CVAE"] = row("g-cvae", clones=clones)
+    shipped = sorted(Path(weights_dir or WEIGHTS_DIR).glob("ppo_gammareach_*.zip"))
+    policies = ({policy_label(path): path for path in shipped} if policies is None
                 else {f"{policy_label(path)} ({path})": path for path in policies})  # fmt: skip
     for label, path in policies.items():
-        runs[label] = GammaRow("policy", path, clones=clones, precision=precision)
+        runs[label] = row("policy", path, clones=clones)
     searchers = {label: path for label, path in policies.items() if label in ("policy(10)", "policy(1)")}
     costs = (("", "release"), (", distance cost", "distance"))
     for (label, path), keep, (cost_name, cost) in itertools.product(searchers.items(), (1, 4), costs):
-        runs[f"{label} & top{keep}{cost_name}"] = GammaRow("policy", path, keep=keep, cost=cost, precision=precision)
+        runs[f"{label} & top{keep}{cost_name}"] = row("policy", path, keep=keep, cost=cost)
     searcher = searchers.get("policy(10)")
-    runs["random z & top4"] = GammaRow("random", keep=4, precision=precision)
+    runs["random z & top4"] = row("random", keep=4)
     rows = run_rows(runs, pairs, seed, ray_address)
     stem = output or "gamma_control" + ("_quick" if quick else "")
     lines = [
@@ -324,11 +337,11 @@ def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False,
         "", *per_body_table(rows, start),
     ]  # fmt: skip
     lines += ["", f"The prior's networks ran in {core.generator.precision} (`precision=\"auto\"`: bf16 only on a CPU with "
-              "native bf16, `motion_envs.precision`)."]  # fmt: skip
+              f"native bf16, `motion_envs.precision`). Prior and policies: {weights_dir or 'the shipped ones'}."]  # fmt: skip
     if (bf16 or core.generator.precision == "bfloat16") and searcher is not None:
         check_pairs, check_clones = BF16_CHECK
         subset = start.index(torch.arange(min(check_pairs, pairs)))
-        cores = {name: GammaReachCore(GammaReachConfig(precision=name)) for name in ("float32", "bfloat16")}
+        cores = {name: GammaReachCore(GammaReachConfig(precision=name, weights_dir=folder)) for name in ("float32", "bfloat16")}
         checks = {}
         for name, check_core in cores.items():
             tick = time.perf_counter()
@@ -338,7 +351,8 @@ def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False,
                   "and in bf16 (`GammaReachConfig.precision`), same policy and seed.", "", *table(checks)]  # fmt: skip
     lines += ["", machine_line(), f"Command: `motion-envs bench gamma{' --quick' if quick else ''}{' --bf16' if bf16 else ''}"
               f"{'' if requested == 'auto' else ' --precision ' + requested}{' --output ' + output if output else ''}"
-              f"{'' if ray_address is None else ' --ray ' + ray_address}`; "
+              f"{'' if ray_address is None else ' --ray ' + ray_address}"
+              f"{'' if weights_dir is None else ' --weights-dir ' + str(weights_dir)}`; "
               f"{time.perf_counter() - began:.0f} s in all.", "", f"![paths]({stem}.png)", ""]  # fmt: skip
     text = "\n".join(lines)
     print(text)

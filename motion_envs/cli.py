@@ -49,7 +49,8 @@ def _bench_gamma(args: argparse.Namespace) -> int:
     from benchmarks.gamma_control import main as gamma_control
 
     return gamma_control(pairs=args.pairs, clones=args.clones, seed=args.seed, quick=args.quick, bf16=args.bf16,
-                         precision=args.precision, output=args.output, ray_address=args.ray, policies=args.policies)  # fmt: skip
+                         precision=args.precision, output=args.output, ray_address=args.ray, policies=args.policies,
+                         weights_dir=args.weights_dir)  # fmt: skip
 
 
 def _bench_clops(args: argparse.Namespace) -> int:
@@ -579,6 +580,9 @@ def parser() -> argparse.ArgumentParser:
     bench_gamma.add_argument("--output", default=None, help="results file stem under benchmarks/results/ (default gamma_control[_quick])")
     bench_gamma.add_argument("--policies", type=Path, nargs="+", default=None,
                              help="policy .zip files to evaluate instead of the shipped ones (clone rows only, no search rows)")
+    bench_gamma.add_argument("--weights-dir", type=Path, default=None,
+                             help="a folder with a GAMMA prior and its ppo_gammareach_*.zip policies, used for both "
+                                  "(e.g. motion_envs/priors/weights/clean; default: the shipped ones)")  # fmt: skip
     _add_ray_arg(bench_gamma)
     bench_gamma.set_defaults(run=_bench_gamma)
     bench_wandr = bench.add_parser("wandr", help="WANDR goal reaching (the paper's 3,750-rollout grid) with the shipped weights")

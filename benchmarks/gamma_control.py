@@ -199,10 +199,17 @@ def per_body_table(rows: dict[str, dict], start: GammaReachState) -> list[str]:
     return lines
 
 
+CLONED_CENTRE = ", KL to N(cloned, I)"
+"""Label suffix of policies trained with `--kl-mean cloned` (`*_cloned.zip`)."""
+
+
 def policy_label(path: Path) -> str:
-    """ppo_gammareach_alpha10_paper.zip -> "policy(10)"; another reward is named: "policy(10), release reward"."""
+    """ppo_gammareach_alpha10_paper.zip -> "policy(10)"; another reward is named: "policy(10), release reward";
+    ppo_gammareach_alpha10_paper_cloned.zip -> "policy(10), KL to N(cloned, I)"."""
     alpha, _, reward = path.stem.removeprefix("ppo_gammareach_alpha").partition("_")
-    return f"policy({alpha})" + ("" if reward == "paper" else f", {reward} reward")
+    cloned = reward.endswith("_cloned")
+    reward = reward.removesuffix("_cloned")
+    return f"policy({alpha})" + ("" if reward == "paper" else f", {reward} reward") + (CLONED_CENTRE if cloned else "")
 
 
 BF16_CHECK = (20, 8)
@@ -312,7 +319,7 @@ def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False,
                 else {f"{policy_label(path)} ({path})": path for path in policies})  # fmt: skip
     for label, path in policies.items():
         runs[label] = row("policy", path, clones=clones)
-    searchers = {label: path for label, path in policies.items() if label in ("policy(10)", "policy(1)")}
+    searchers = {label: path for label, path in policies.items() if label in ("policy(10)", "policy(1)", "policy(10)" + CLONED_CENTRE)}
     costs = (("", "release"), (", distance cost", "distance"))
     for (label, path), keep, (cost_name, cost) in itertools.product(searchers.items(), (1, 4), costs):
         runs[f"{label} & top{keep}{cost_name}"] = row("policy", path, keep=keep, cost=cost)

@@ -36,7 +36,7 @@ def main() -> int:
         rates = [point["success_rate"] for point in curve]
         label = Path(name).stem.removeprefix("ppo_")
         best = max(curve, key=lambda point: point["success_rate"])
-        lines.append(f"| {label} | `{entry['config']['command']}` | {rates[0]:.2f} | {best['success_rate']:.2f} | "
+        lines.append(f"| {label} | `{entry.get('repeat', entry['config']['command'])}` | {rates[0]:.2f} | {best['success_rate']:.2f} | "
                      f"{best['timesteps']:,} | {best['wall_seconds'] / 60:.0f} | {entry['timesteps']:,} | "
                      f"{entry.get('machine', 'not recorded')} |")  # fmt: skip
     curves = {Path(name).stem.removeprefix("ppo_"): entry["curve"] for name, entry in runs.items()}

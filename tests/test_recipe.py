@@ -45,23 +45,22 @@ def test_finished_stages_are_skipped_and_shipped_with_their_record(tmp_path, mon
 
 def test_the_clean_priors_load_in_their_envs_and_record_their_data():
     """The retrained priors whose agents are not yet retrained ship beside the defaults (priors/weights/clean/) and
-    run where envs are told to load them; each has a manifest record naming its data cache and command. WANDR's
-    clean prior is the default now, its record naming the prior it replaced."""
+    run where envs are told to load them; each has a manifest record naming its data cache and command. WANDR's and
+    GAMMA's clean priors are the defaults now, their records naming the priors they replaced."""
     import gymnasium as gym
     import numpy as np
 
     import motion_envs  # noqa: F401  (registers the ids)
     from motion_envs.priors.training import CLEAN_WEIGHTS_DIR, WEIGHTS_DIR
 
-    default = json.loads((WEIGHTS_DIR / "manifest.json").read_text())["wandr.pt"]
-    assert "--prior-init" in default["command"] and "train wandr" in default["replaces"]["command"]
+    defaults = json.loads((WEIGHTS_DIR / "manifest.json").read_text())
+    assert "--prior-init" in defaults["wandr.pt"]["command"] and "train wandr" in defaults["wandr.pt"]["replaces"]["command"]
+    for name in ("gamma_predictor_1f.pt", "gamma_predictor_2f.pt", "gamma_regressor.pt", "ppo_gammareach_alpha1_paper.zip"):
+        assert "uncleaned" in defaults[name]["replaces"]["why"], name
     manifest = json.loads((CLEAN_WEIGHTS_DIR / "manifest.json").read_text())
-    options = {"clops.pt": ("motion_envs/ClopsNav-v0", "weights"),
-               "gamma_predictor_2f.pt": ("motion_envs/GammaReach-v0", "weights_dir")}  # fmt: skip
-    for name, (env_id, option) in options.items():
-        assert manifest[name]["data_hash"].startswith("motion_") and "train" in manifest[name]["command"]
-        env = gym.make(env_id, **{option: str(CLEAN_WEIGHTS_DIR / name if option == "weights" else CLEAN_WEIGHTS_DIR)})
-        env.reset(seed=0)
-        env.action_space.seed(0)
-        _, reward, *_ = env.step(env.action_space.sample())
-        assert np.isfinite(reward)
+    assert manifest["clops.pt"]["data_hash"].startswith("motion_") and "train" in manifest["clops.pt"]["command"]
+    env = gym.make("motion_envs/ClopsNav-v0", weights=str(CLEAN_WEIGHTS_DIR / "clops.pt"))
+    env.reset(seed=0)
+    env.action_space.seed(0)
+    _, reward, *_ = env.step(env.action_space.sample())
+    assert np.isfinite(reward)

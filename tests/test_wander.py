@@ -124,10 +124,10 @@ def _table_scene() -> Scene:
 
 def test_the_search_prunes_branches_that_walk_into_a_table(gamma):
     """The goal lies straight across a table. Half of each node's children follow the GammaReach policy (which walks
-    straight at it, through the table), half are random latents: with the collision term the chosen branches avoid
-    the table; ranked by distance alone (no collision or clearance term) they walk into it. Collisions are counted on the branches as searched
-    (`found.collisions`): replayed one body at a time, a branch is not bit-identical to its search in a batch
-    of 64 (bf16 kernels on AMX CPUs sum differently per batch size), and near the table that can tip a contact."""
+    straight at it, through the table), half are random latents: with the scene terms the chosen branches avoid the
+    table; ranked by distance alone (no collision or clearance term) they walk into it. Collisions are counted on the
+    branches as searched (`found.collisions`): a replay one body at a time is not guaranteed to be bit-identical to
+    the search in a batch of 64 (bf16 kernels on AMX CPUs may sum in another order per batch size)."""
     from agents.controllers import PolicyLatent
     from motion_envs.priors.training import WEIGHTS_DIR
 

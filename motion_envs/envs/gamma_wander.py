@@ -215,11 +215,15 @@ class GammaWanderStepResult:
     terminated: torch.Tensor
     truncated: torch.Tensor
     clearance: torch.Tensor
-    penetration: torch.Tensor
     collided: torch.Tensor
     crowding: torch.Tensor
     contact_score: torch.Tensor
     primitive: Primitive
+
+    @property
+    def penetration(self) -> torch.Tensor:
+        """(N,) the deepest body sphere inside the scene (m, 0 when clear)."""
+        return (-self.clearance).clamp(min=0.0)
 
 
 class GammaWanderCore:
@@ -363,8 +367,7 @@ class GammaWanderCore:
                                     closest=torch.where(advance, waypoint_distance, reach.closest),
                                     goal_paid=torch.where(advance, torch.zeros_like(reach.goal_paid), reach.goal_paid))  # fmt: skip
         clearance = self.clearance(moved.primitive.joints, state.scene)
-        penetration = (-clearance).clamp(min=0.0)
-        collided = penetration > config.collision_tolerance
+        collided = -clearance > config.collision_tolerance
         crowding = crowding_depth(moved.primitive.joints[:, :, PELVIS, :2], state.neighbours)
         remaining = (config.max_primitives - reach.steps).to(moved.reward.dtype)
         terms = {**moved.terms, "collision": -collided.float(),
@@ -373,8 +376,7 @@ class GammaWanderCore:
         truncated = (reach.steps >= config.max_primitives) & ~reached
         next_state = dataclasses.replace(state, reach=reach, current=current, collisions=state.collisions + collided.long())
         result = GammaWanderStepResult(reward, terms, next_state.distance_left(pelvis), waypoint_distance, reached, reached,
-                                       truncated, clearance, penetration, collided, crowding, moved.contact_score,
-                                       moved.primitive)  # fmt: skip
+                                       truncated, clearance, collided, crowding, moved.contact_score, moved.primitive)  # fmt: skip
         return next_state, result
 
     def clearance(self, joints: torch.Tensor, scene: torch.Tensor) -> torch.Tensor:

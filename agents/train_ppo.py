@@ -83,8 +83,9 @@ class PPOTrainConfig:
     """Centre of the α Ψ(KL) regulariser: "zero" (the paper's N(0, I)) or "cloned" (N(μ_cloned(s), I), ours;
     `PPOKL.prior_mean`)."""
     keep: str = "best"
-    """"best": keep the checkpoint whose training-success window was best, a guard against late drift (before
-    Monte-Carlo returns, runs went 0.23 -> 0.51 -> 0.09 over 230k steps); "last": the final one."""
+    """"best": keep the checkpoint whose training window scored best (`window_score`: success, less the share of
+    colliding primitives in envs that report collisions), a guard against late drift (before Monte-Carlo returns,
+    runs went 0.23 -> 0.51 -> 0.09 over 230k steps); "last": the final one."""
     checkpoint_minutes: float = 3.0
     seed: int = 0
     device: str = "cpu"
@@ -145,13 +146,23 @@ class PPOTrainConfig:
                                    self.ship)  # fmt: skip
 
 
+def window_score(point: dict) -> float:
+    """How a training window ranks for `keep="best"`: its success rate, less its share of colliding primitives where
+    the env reports collisions (GammaWander: a window that succeeds as often but walks through more furniture is
+    worse; its targets are success >= 0.9 with <= 5% colliding primitives)."""
+    return point["success_rate"] - point.get("collided_share", 0.0)
+
+
 class CurveCallback(BaseCallback):
-    """Every few minutes: save the model atomically and record the recent success rate."""
+    """Every few minutes: save the model atomically and record the recent success rate (and, where episodes end with
+    a `collisions` count, the share of their primitives that collided)."""
 
     def __init__(self, run_dir: Path, minutes: float, curve: list[dict]) -> None:
         super().__init__()
         self.run_dir, self.seconds, self.curve = run_dir, 60.0 * minutes, curve
         self.successes: list[float] = []
+        self.collided: list[tuple[int, int]] = []
+        """(colliding primitives, primitives) of each episode that reported collisions."""
         self.last = time.monotonic()
         self.wall = curve[-1]["wall_seconds"] if curve else 0.0
 
@@ -159,6 +170,8 @@ class CurveCallback(BaseCallback):
         for info, done in zip(self.locals["infos"], self.locals["dones"]):
             if done and "is_success" in info:
                 self.successes.append(float(info["is_success"]))
+            if done and "collisions" in info and "episode" in info:
+                self.collided.append((int(info["collisions"]), int(info["episode"]["l"])))
         if time.monotonic() - self.last > self.seconds:
             self.save()
         return True
@@ -168,12 +181,16 @@ class CurveCallback(BaseCallback):
         self.wall += now - self.last
         self.last = now
         if self.successes:
-            best = max((point["success_rate"] for point in self.curve), default=-1.0)
+            best = max((window_score(point) for point in self.curve), default=-np.inf)
             self.curve.append({"timesteps": int(self.num_timesteps), "wall_seconds": round(self.wall, 1),
                                "success_rate": float(np.mean(self.successes)), "episodes": len(self.successes)})  # fmt: skip
+            if self.collided:
+                collisions, primitives = np.sum(self.collided, axis=0)
+                self.curve[-1]["collided_share"] = float(collisions / max(primitives, 1))
+                self.logger.record("rollout/collided_share_window", self.curve[-1]["collided_share"])
             self.logger.record("rollout/success_rate_window", self.curve[-1]["success_rate"])
-            self.successes = []
-            if self.curve[-1]["success_rate"] > best:
+            self.successes, self.collided = [], []
+            if window_score(self.curve[-1]) > best:
                 atomic_write(self.run_dir / "best.zip", self.model.save)
         atomic_write(self.run_dir / "model.zip", self.model.save)
         normaliser = self.model.get_vec_normalize_env()
@@ -256,7 +273,7 @@ def ship_policy(model: Any, config: Any, curve: list[dict], kind: str, best: boo
     state, record a manifest entry (kind, config, steps, curve, torch, machine, `extra`) and plot the curve; returns
     the entry."""
     weights = config.weights_path()
-    top = max(curve, key=lambda point: point["success_rate"]) if curve else None
+    top = max(curve, key=window_score) if curve else None
     shipped_best = best and top is not None and (config.run_dir / "best.zip").exists()
     chosen = type(model).load(config.run_dir / "best.zip", device="cpu") if shipped_best else model
     optimiser = chosen.policy.optimizer  # shipped without Adam's moments: half the size (runs/ keeps them to resume)

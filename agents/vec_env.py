@@ -69,8 +69,9 @@ class NativeVecEnv(VecEnv):
             infos[index]["terminal_observation"] = info["final_obs"][index]
             infos[index]["TimeLimit.truncated"] = self.bootstrap_truncation and bool(truncated[index] and not terminated[index])
             final = info.get("final_info", {})
-            if "is_success" in final:
-                infos[index]["is_success"] = bool(final["is_success"][index])
+            for name, values in final.items():  # is_success, and e.g. GammaWander's episode collisions
+                if not name.startswith("_"):
+                    infos[index][name] = values[index].item()
         return observations, rewards.astype(np.float32), dones, infos
 
     def close(self) -> None:

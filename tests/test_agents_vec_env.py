@@ -64,3 +64,30 @@ def test_adapter_rejects_next_step_autoreset_envs():
     vector = gym.make_vec("CartPole-v1", num_envs=2, vectorization_mode="sync")
     with pytest.raises(ValueError, match="same-step autoreset"):
         NativeVecEnv(vector)
+
+
+def test_episode_ends_carry_the_envs_final_info_and_collisions_rank_training_windows(gamma):
+    """GammaWander's episode collisions reach SB3's infos (what `CurveCallback` turns into a window's colliding share),
+    counted as the env's own per-primitive `collided` flags; the same seeds, actions and batch size in both envs
+    make the two runs identical by construction."""
+    import gymnasium as gym
+
+    from agents.train_ppo import window_score
+
+    kwargs = {"num_envs": 4, "generator": gamma, "scene": "corridor", "max_primitives": 6}
+    raw = gym.make_vec("motion_envs/GammaWander-v0", vectorization_mode="vector_entry_point", **kwargs)
+    venv = VecMonitor(NativeVecEnv.make("motion_envs/GammaWander-v0", **kwargs))
+    raw.reset(seed=[3, 4, 5, 6])
+    venv.seed(3)
+    venv.reset()
+    actions = np.random.default_rng(1).standard_normal((6, 4, 128)).astype(np.float32)
+    collided = np.zeros(4, dtype=int)
+    for a in actions:
+        _, _, _, _, info = raw.step(a)
+        collided += info["collided"]
+        _, _, dones, infos = venv.step(a)
+    assert dones.all() and collided.sum() > 0
+    assert [info["collisions"] for info in infos] == collided.tolist()
+    assert all(info["episode"]["l"] == 6 and isinstance(info["is_success"], bool) for info in infos)
+    clean, colliding = {"success_rate": 0.9, "collided_share": 0.02}, {"success_rate": 0.92, "collided_share": 0.15}
+    assert window_score(clean) > window_score(colliding) and window_score({"success_rate": 0.5}) == 0.5

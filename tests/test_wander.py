@@ -155,6 +155,36 @@ def test_the_search_prunes_branches_that_walk_into_a_table(gamma):
     assert collisions[False] >= 16 and collisions[True] <= collisions[False] / 4, collisions
 
 
+def test_collision_and_clearance_penalties_are_paid_in_proportion(gamma):
+    """A body walking straight through a table: the same latents with and without the penalties move it alike (the
+    reward does not feed back into the motion), and the rewards differ by exactly collision_penalty per colliding
+    primitive plus clearance_penalty per metre inside the margin."""
+    from agents.controllers import PolicyLatent
+    from motion_envs.priors.training import WEIGHTS_DIR
+
+    policy = PolicyLatent(WEIGHTS_DIR / "ppo_gammareach_alpha1_paper.zip", deterministic=True)
+    rewards, results = {}, {}
+    for paid in (False, True):
+        config = GammaWanderConfig(scene="flat", collision_penalty=4.0 * paid, clearance_penalty=10.0 * paid, precision="float32")
+        core = GammaWanderCore(config, gamma)
+        slot = core.add_scene(_table_scene())
+        state = core.initial_state(torch.tensor([0]), torch.tensor([0.0]), np.array([[3.0, 2.0]]),
+                                   [np.array([[5.4, 2.0]])], torch.tensor([slot]))  # fmt: skip
+        rewards[paid], results[paid] = [], []
+        for _ in range(12):  # measured: it reaches the table's edge after ~8 primitives and pushes in, 4-19 cm deep
+            state, result = core.step(state, policy(core, state))
+            rewards[paid].append(result.reward)
+            results[paid].append(result)
+    clearance = torch.cat([result.clearance for result in results[True]])
+    collided = torch.cat([result.collided for result in results[True]])
+    assert torch.equal(clearance, torch.cat([result.clearance for result in results[False]]))
+    assert collided.sum() >= 2 and torch.isfinite(clearance).all()
+    expected = 4.0 * collided.float() + 10.0 * (0.1 - clearance).clamp(min=0.0)
+    assert torch.allclose(torch.cat(rewards[False]) - torch.cat(rewards[True]), expected, atol=1e-4)
+    with pytest.raises(ValueError, match="clearance_penalty"):
+        GammaWanderConfig(clearance_penalty=-1.0)
+
+
 def test_populate_end_to_end_writes_a_rollout_a_video_and_views_from_above(tmp_path):
     import subprocess
     import sys

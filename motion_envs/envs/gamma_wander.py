@@ -28,8 +28,9 @@ env unchanged: it sees the current waypoint as its goal, the paper's way.
 ## Rewards
 
 GammaReach's terms (`motion_envs.rewards`, weights from `reward`) towards the current waypoint, minus
-`collision_penalty` for a primitive in which a body sphere enters the scene more than `collision_tolerance`
-(0 by default: collisions are reported in `info`, not paid). When a waypoint is passed the goal term's
+`collision_penalty` for a primitive in which a body sphere enters the scene more than `collision_tolerance`,
+and `clearance_penalty` per metre that its deepest sphere comes inside `clearance_margin` of the scene (both 0
+by default: collisions are reported in `info`, not paid). When a waypoint is passed the goal term's
 closest distance restarts from the next one. Arriving at the last waypoint also earns the remaining
 primitives at the best per-step reward (GammaReach's `goal_absorbing`), so that ending early never pays less
 than walking on.
@@ -113,6 +114,11 @@ class GammaWanderConfig:
     collision_tolerance: float = 0.02
     """Penetration (m) below which a sphere does not count as colliding (the grid has 5 cm voxels)."""
     collision_penalty: float = 0.0
+    clearance_penalty: float = 0.0
+    """Per metre that the deepest body sphere of a primitive comes inside `clearance_margin` of the scene (ours; 0: off).
+    Dense where `collision_penalty` is a flat toll: a body 14 cm inside a sofa pays more than one grazing it, and
+    one that brushes past within the margin pays a little before it collides."""
+    clearance_margin: float = 0.1
     reward: RewardConfig = dataclasses.field(default_factory=RewardConfig.paper)
     start_kind: str = "any"
     latent_bound: float = 4.0
@@ -132,6 +138,9 @@ class GammaWanderConfig:
             raise ValueError(f"train_scenes must lie in [1, {len(TRAIN_SEEDS)}], got {self.train_scenes}")
         if self.scene_seeds is not None and len(self.scene_seeds) == 0:
             raise ValueError("scene_seeds must name at least one seed")
+        if min(self.collision_penalty, self.clearance_penalty, self.clearance_margin) < 0:
+            raise ValueError(f"collision_penalty, clearance_penalty and clearance_margin must be >= 0, got "
+                             f"{self.collision_penalty}, {self.clearance_penalty}, {self.clearance_margin}")  # fmt: skip
         if min(self.waypoint_spacing, self.waypoint_radius, self.goal_radius, self.max_primitives) <= 0:
             raise ValueError("waypoint_spacing, waypoint_radius, goal_radius and max_primitives must be positive")
         if not 1 <= self.flat_legs[0] <= self.flat_legs[1] or not 0 < self.flat_leg_length[0] <= self.flat_leg_length[1]:
@@ -371,8 +380,10 @@ class GammaWanderCore:
         crowding = crowding_depth(moved.primitive.joints[:, :, PELVIS, :2], state.neighbours)
         remaining = (config.max_primitives - reach.steps).to(moved.reward.dtype)
         terms = {**moved.terms, "collision": -collided.float(),
+                 "clearance": -(config.clearance_margin - clearance).clamp(min=0.0),
                  "goal_absorbing": goal_absorbing_reward(reached, remaining, config.reward.best_step_reward)}  # fmt: skip
-        reward = moved.reward - config.collision_penalty * collided.float() + terms["goal_absorbing"]
+        reward = (moved.reward + config.collision_penalty * terms["collision"] + config.clearance_penalty * terms["clearance"]
+                  + terms["goal_absorbing"])  # fmt: skip
         truncated = (reach.steps >= config.max_primitives) & ~reached
         next_state = dataclasses.replace(state, reach=reach, current=current, collisions=state.collisions + collided.long())
         result = GammaWanderStepResult(reward, terms, next_state.distance_left(pelvis), waypoint_distance, reached, reached,

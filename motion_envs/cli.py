@@ -92,6 +92,13 @@ def _bench_wandr_pace(args: argparse.Namespace) -> int:
     return wandr_pace(args.weights or [WEIGHTS_DIR / "wandr.pt"])
 
 
+def _bench_clops_actions(args: argparse.Namespace) -> int:
+    from benchmarks.clops_actions import main as clops_actions
+    from motion_envs.priors.training import WEIGHTS_DIR
+
+    return clops_actions(args.weights or [WEIGHTS_DIR / "clops.pt", WEIGHTS_DIR / "clean" / "clops.pt"], rooms=args.rooms)
+
+
 def _bench_cleanup_video(args: argparse.Namespace) -> int:
     from benchmarks.cleanup_video import main as cleanup_video
 
@@ -610,6 +617,11 @@ def parser() -> argparse.ArgumentParser:
     bench_pace = bench.add_parser("wandr-pace", help="does WANDR's prior keep the intention's pace on its own training windows?")
     bench_pace.add_argument("--weights", type=Path, nargs="+", default=None, help="WANDR priors (default: the shipped one)")
     bench_pace.set_defaults(run=_bench_wandr_pace)
+    bench_actions = bench.add_parser("clops-actions", help="how far each CLOPS action carries the body, per prior")
+    bench_actions.add_argument("--weights", type=Path, nargs="+", default=None,
+                               help="CLOPS priors (default: the shipped one and priors/weights/clean/clops.pt)")
+    bench_actions.add_argument("--rooms", type=int, default=8, help="held-out open rooms, one body per room and action")
+    bench_actions.set_defaults(run=_bench_clops_actions)
     bench_clops = bench.add_parser("clops", help="CLOPS scene matrix: shipped ClopsNav policies on every family's test seeds")
     bench_clops.add_argument("--episodes", type=int, default=100, help="test seeds per family, one episode each (max 100)")
     bench_clops.add_argument("--families", default=None, help="comma-separated layout families (default: all five)")

@@ -316,3 +316,17 @@ def test_live_episodes_feed_the_viewer_clops_frames_in_one_room():
     first, second = live.more(), live.more()
     assert len(first.transl) >= 30 and len(second.transl) >= 30  # about a second of 30 fps frames each
     assert first.scene == second.scene == "open:1000"
+
+
+def test_clops_actions_bench_measures_travel_per_action():
+    """`bench clops-actions` on one room: the longest target moves the head further than the standing ones, frames
+    per action lie in 1..max_chunk_frames, and only actions that used every frame count as timed out."""
+    from benchmarks.clops_actions import action_travel
+    from motion_envs.priors.training import WEIGHTS_DIR
+
+    figures = action_travel(WEIGHTS_DIR / "clops.pt", rooms=1, actions=2)
+    targets, travel, frames = figures["targets"], figures["travel"], figures["frames"]
+    assert targets.shape == (16, 2) and travel.shape == frames.shape == figures["timed_out"].shape == (16,)
+    farthest, nearest = int(targets[:, 0].argmax()), int(targets[:, 0].argmin())
+    assert travel[farthest] > 0.3 and travel[farthest] > 5 * travel[nearest]
+    assert ((frames >= 1) & (frames <= 30)).all() and ((figures["timed_out"] > 0) <= (frames > 1)).all()

@@ -293,14 +293,21 @@ def _env_option(option: str) -> tuple[str, object]:
 def _train_priors(args: argparse.Namespace) -> int:
     from motion_envs.priors.recipe import train_priors
 
-    data_args = [*(["--mocap-dir", str(args.mocap_dir)] if args.mocap_dir else []),
-                 *(["--cache-dir", str(args.cache_dir)] if args.cache_dir else []),
-                 *[word for name in (args.subset or []) for word in ("--subset", name)]]  # fmt: skip
+    passed_args = [*(["--mocap-dir", str(args.mocap_dir)] if args.mocap_dir else []),
+                   *(["--cache-dir", str(args.cache_dir)] if args.cache_dir else []),
+                   *[word for name in (args.subset or []) for word in ("--subset", name)],
+                   *(["--threads", str(args.threads)] if args.threads else [])]  # fmt: skip
     stages = args.stages.split(",") if args.stages else None
-    return train_priors(stages, Path(args.run_dir or "runs/priors"), args.ship, data_args)
+    return train_priors(stages, Path(args.run_dir or "runs/priors"), args.ship, passed_args)
 
 
 def _train(args: argparse.Namespace) -> int:
+    if args.threads is not None:
+        if args.threads < 1:
+            raise ValueError(f"--threads must be at least 1, got {args.threads}")
+        import torch
+
+        torch.set_num_threads(args.threads)
     if args.what == "priors":
         return _train_priors(args)
     if args.what == "ppo":
@@ -566,6 +573,8 @@ def parser() -> argparse.ArgumentParser:
     train.add_argument("--address", default=None,
                        help="--engine rllib: the Ray cluster to join (e.g. auto, host:6379); default a local Ray")
     train.add_argument("--seed", type=int, default=None)
+    train.add_argument("--threads", type=int, default=None,
+                       help="torch threads (default: torch's, one per core); 1 runs two trainings side by side on 2 cores")
     _add_data_args(train, list(SHIPPED_SUBSETS))
     train.set_defaults(run=_train)
 

@@ -271,6 +271,15 @@ def test_train_defaults_follow_the_env_and_mocap_dir_means_the_clips_folder(tmp_
     assert _subsets(parser().parse_args(["data", "build", "--mocap-dir", str(tmp_path)])) == ()
 
 
+def test_train_threads_below_one_is_refused_before_anything_runs(capsys):
+    """`train --threads` sets torch's threads for the run; 0 or less names the option instead of training."""
+    from motion_envs.cli import main
+
+    assert main(["train", "ppo", "--threads", "0", "--timesteps", "1"]) == 1
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert line.startswith("motion-envs train: error:") and "--threads must be at least 1, got 0" in line
+
+
 def test_broken_prior_checkpoints_name_the_file_and_never_suggest_unsafe_loading(tmp_path):
     """A truncated checkpoint gave `OSError: [Errno 22] Invalid argument` without a file name, a garbage one torch's
     advice to set weights_only=False."""

@@ -91,10 +91,10 @@ def stages_named(names: list[str] | None) -> list[Stage]:
     return [stage for stage in RECIPE if names is None or stage.name in names]
 
 
-def stage_argv(stage: Stage, root: Path, data_args: list[str]) -> list[str]:
-    """The `motion-envs` argument list of one stage."""
+def stage_argv(stage: Stage, root: Path, passed_args: list[str]) -> list[str]:
+    """The `motion-envs` argument list of one stage, ending in `passed_args` (data folder, subsets, threads)."""
     return ["train", *stage.arguments(root), "--run-dir", str(stage.run_dir(root)), "--weights",
-            str(stage.output(root)), *data_args]  # fmt: skip
+            str(stage.output(root)), *passed_args]  # fmt: skip
 
 
 def plan(stages: list[Stage], root: Path) -> list[str]:
@@ -108,7 +108,7 @@ def plan(stages: list[Stage], root: Path) -> list[str]:
 
 
 def train_priors(names: list[str] | None = None, root: Path = RUNS, ship: bool = False,
-                 data_args: list[str] | None = None) -> int:  # fmt: skip
+                 passed_args: list[str] | None = None) -> int:  # fmt: skip
     """Run the stages in order (skipping finished ones); returns the first failing stage's exit code, or 0."""
     stages = stages_named(names)
     print("stages (expected wall time on 2 cores):", *plan(stages, root), sep="\n")
@@ -119,7 +119,7 @@ def train_priors(names: list[str] | None = None, root: Path = RUNS, ship: bool =
         if stage.output(root).exists():
             print(f"{stage.name}: done ({stage.output(root)})")
         else:
-            argv = stage_argv(stage, root, data_args or [])
+            argv = stage_argv(stage, root, passed_args or [])
             print(f"{stage.name}: motion-envs {' '.join(argv)}", flush=True)
             code = subprocess.call([sys.executable, "-m", "motion_envs.cli", *argv])
             if code != 0:

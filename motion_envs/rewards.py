@@ -182,9 +182,9 @@ def wrist_progress(previous_distance: torch.Tensor, distance: torch.Tensor) -> t
 
 
 def overspeed(previous_pelvis: torch.Tensor, pelvis: torch.Tensor, fps: float, limit: float) -> torch.Tensor:
-    """(N,) m/s by which the pelvis moved over the ground faster than `limit` this frame (0 when slower);
-    previous_pelvis, pelvis: (N, 3) positions one frame (1 / fps s) apart."""
-    return ((pelvis - previous_pelvis)[:, :2].norm(dim=-1) * fps - limit).clamp_min(0.0)
+    """(...) m/s by which the pelvis moved over the ground faster than `limit` this frame (0 when slower);
+    previous_pelvis, pelvis: (..., 3) positions one frame (1 / fps s) apart."""
+    return ((pelvis - previous_pelvis)[..., :2].norm(dim=-1) * fps - limit).clamp_min(0.0)
 
 
 def latent_cost(z: torch.Tensor) -> torch.Tensor:

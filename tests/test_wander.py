@@ -155,17 +155,19 @@ def test_the_search_prunes_branches_that_walk_into_a_table(gamma):
     assert collisions[False] >= 16 and collisions[True] <= collisions[False] / 4, collisions
 
 
-def test_collision_and_clearance_penalties_are_paid_in_proportion(gamma):
+def test_collision_clearance_and_speeding_penalties_are_paid_in_proportion(gamma):
     """A body walking straight through a table: the same latents with and without the penalties move it alike (the
     reward does not feed back into the motion), and the rewards differ by exactly collision_penalty per colliding
-    primitive plus clearance_penalty per metre inside the margin."""
+    primitive, clearance_penalty per metre inside the margin and speeding per frame and m/s that the pelvis is
+    faster than walk_speed (0.5 m/s here, so that an ordinary walk pays it)."""
     from agents.controllers import PolicyLatent
     from motion_envs.priors.training import WEIGHTS_DIR
 
     policy = PolicyLatent(WEIGHTS_DIR / "ppo_gammareach_alpha1_paper.zip", deterministic=True)
     rewards, results = {}, {}
     for paid in (False, True):
-        config = GammaWanderConfig(scene="flat", collision_penalty=4.0 * paid, clearance_penalty=10.0 * paid, precision="float32")
+        config = GammaWanderConfig(scene="flat", collision_penalty=4.0 * paid, clearance_penalty=10.0 * paid,
+                                   speeding=2.0 * paid, walk_speed=0.5, precision="float32")  # fmt: skip
         core = GammaWanderCore(config, gamma)
         slot = core.add_scene(_table_scene())
         state = core.initial_state(torch.tensor([0]), torch.tensor([0.0]), np.array([[3.0, 2.0]]),
@@ -179,10 +181,20 @@ def test_collision_and_clearance_penalties_are_paid_in_proportion(gamma):
     collided = torch.cat([result.collided for result in results[True]])
     assert torch.equal(clearance, torch.cat([result.clearance for result in results[False]]))
     assert collided.sum() >= 2 and torch.isfinite(clearance).all()
-    expected = 4.0 * collided.float() + 10.0 * (0.1 - clearance).clamp(min=0.0)
-    assert torch.allclose(torch.cat(rewards[False]) - torch.cat(rewards[True]), expected, atol=1e-4)
+    over = []
+    for result in results[True]:
+        pelvis = result.primitive.joints[:, :, 0, :2].double()
+        speed = (pelvis[:, 1:] - pelvis[:, :-1]).norm(dim=-1) * 40.0
+        new = torch.arange(1, pelvis.shape[1]) >= result.primitive.seed_frames[:, None]
+        over.append(((speed - 0.5).clamp(min=0.0) * new).sum(dim=1).float())
+    over = torch.cat(over)
+    assert (over > 0).sum() >= 6, over  # the body walks faster than 0.5 m/s in most primitives
+    expected = 4.0 * collided.float() + 10.0 * (0.1 - clearance).clamp(min=0.0) + 2.0 * over
+    assert torch.allclose(torch.cat(rewards[False]) - torch.cat(rewards[True]), expected, atol=1e-3)
     with pytest.raises(ValueError, match="clearance_penalty"):
         GammaWanderConfig(clearance_penalty=-1.0)
+    with pytest.raises(ValueError, match="walk_speed"):
+        GammaWanderConfig(walk_speed=0.0)
 
 
 def test_populate_end_to_end_writes_a_rollout_a_video_and_views_from_above(tmp_path):

@@ -8,7 +8,8 @@
 2. **Rooms**: `rooms` held-out rooms per layout family (`TEST_SEEDS`), start and goal at the far ends of the
    walkable region (`scenes.paths.far_ends`), one body per room. Collisions: share of primitives in which a
    body sphere is more than 2 cm inside furniture or a wall, and per second of motion. The "straight at the
-   goal" row gives the policy the goal alone (no planned path).
+   goal" row gives the policy the goal alone (no planned path); the search rows (the policy's proposals with
+   either cost, random z with the distance cost) follow the planned path.
 3. **Crowd**: 16 bodies for 30 s in `living:1003` (`motion_envs.populate`).
 
 Time to arrive: seconds of motion to success (successful paths). Contact score: GAMMA Eq. 11; FS: WANDR's
@@ -156,9 +157,9 @@ def main(paths: int = 100, clones: int = 32, repeats: int = 4, rooms: int = 100,
         for label, policy in labels.items():
             rooms_rows[family][f"{label}, planned path"] = run_row(room_core, planned, "policy", seed, policy=policy)
             rooms_rows[family][f"{label}, straight at the goal"] = run_row(room_core, straight, "policy", seed, policy=policy)
-        for keep in (1, 4):
-            rooms_rows[family][f"{main_label} & top{keep} distance, planned path"] = run_row(
-                room_core, planned, f"policy & top{keep} distance", seed, policy=main_policy)
+        for row in ("policy & top1 distance", "policy & top4 distance", "policy & top1 release", "random z & top4 distance"):
+            name = row.replace("policy", main_label) + ", planned path"
+            rooms_rows[family][name] = run_row(room_core, planned, row, seed, policy=main_policy)
     room_columns = ("success", "time", "left", "collisions", "collisions per s", "FS", "seconds")
 
     crowd = populate(make_scene("living", 1003), PolicyLatent(main_policy, seed=seed), 16, crowd_seconds, seed,

@@ -35,6 +35,11 @@ import torch
 from motion_envs.body.canonical_frame import LEFT_HIP, PELVIS, RIGHT_HIP
 
 
+DATA_WALK_SPEED = 2.1
+"""m/s: the data's fastest walking (no half-second window of the CMU test walks is faster); the speeding terms'
+default limit."""
+
+
 @dataclass(frozen=True)
 class RewardConfig:
     """Weights (β) and shapes of GAMMA's reward terms."""
@@ -165,8 +170,7 @@ class WandrRewardConfig:
     """Per frame, times the m/s by which the pelvis moves over the ground faster than `walk_speed` (`overspeed`).
     Ours: without it the policy reached far goals by running (median peak pelvis speed 3.8 m/s for goals 5–6 m
     away), because discounting pays arriving sooner; the task is walking and reaching."""
-    walk_speed: float = 2.1
-    """m/s: the data's fastest walking (no half-second window of the CMU test walks is faster)."""
+    walk_speed: float = DATA_WALK_SPEED
     latent: float = 0.01
     """Times the mean square of z: keeps actions where the prior was trained (N(0, I))."""
 

@@ -31,8 +31,8 @@ GammaReach's terms (`motion_envs.rewards`, weights from `reward`) towards the cu
 `collision_penalty` for a primitive in which a body sphere enters the scene more than `collision_tolerance`,
 and `clearance_penalty` per metre that its deepest sphere comes inside `clearance_margin` of the scene, and
 `speeding` per frame and m/s that the pelvis moves faster than `walk_speed` over the ground (all 0 by default:
-collisions are reported in `info`, not paid; the shipped policy's recipe sets them). When a waypoint is passed the goal term's
-closest distance restarts from the next one. Arriving at the last waypoint also earns the remaining
+collisions are reported in `info`, not paid; the shipped policy's recipe sets them). When a waypoint is
+passed the goal term's closest distance restarts from the next one. Arriving at the last waypoint also earns the remaining
 primitives at the best per-step reward (GammaReach's `goal_absorbing`), so that ending early never pays less
 than walking on.
 
@@ -80,7 +80,7 @@ from motion_envs.envs.options import check_known, index, number, point, scene_se
 from motion_envs.precision import PRECISIONS
 from motion_envs.priors.gamma_generator import GammaGenerator, GammaSeed, Primitive
 from motion_envs.render.env_view import RenderInputs
-from motion_envs.rewards import RewardConfig, goal_absorbing_reward, overspeed
+from motion_envs.rewards import DATA_WALK_SPEED, RewardConfig, goal_absorbing_reward, overspeed
 from motion_envs.scenes.layouts import FAMILIES, TRAIN_SEEDS, families_of, make_scene, seeds_of
 from motion_envs.scenes.paths import cell_costs, plan_path, split_legs
 from motion_envs.scenes.scene import Scene
@@ -126,8 +126,7 @@ class GammaWanderConfig:
     off). GAMMA's reward pays arriving early (`goal_absorbing`) and, with the scene penalties, every primitive
     spent in a room costs: without this term fine-tuned policies run through living rooms (measured: 32% of
     primitives above 2.1 m/s, a 90th percentile of 2.7 m/s)."""
-    walk_speed: float = 2.1
-    """m/s: the fastest pelvis ground speed of the CMU test walks (WandrReach's `walk_speed`)."""
+    walk_speed: float = DATA_WALK_SPEED
     reward: RewardConfig = dataclasses.field(default_factory=RewardConfig.paper)
     start_kind: str = "any"
     latent_bound: float = 4.0

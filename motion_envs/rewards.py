@@ -38,6 +38,10 @@ from motion_envs.body.canonical_frame import LEFT_HIP, PELVIS, RIGHT_HIP
 DATA_WALK_SPEED = 2.1
 """m/s: the data's fastest walking (no half-second window of the CMU test walks is faster); the speeding terms'
 default limit."""
+UPRIGHT_LEAN = 0.26
+"""Radians (15 degrees): how far the trunk (pelvis to neck) leans from vertical in the clean data's walking (pelvis
+ground speed 0.5-2.1 m/s): the test split's 90th percentile is 11 degrees, the training split's 20; the stooping
+terms' default limit."""
 
 
 @dataclass(frozen=True)
@@ -189,6 +193,13 @@ def overspeed(previous_pelvis: torch.Tensor, pelvis: torch.Tensor, fps: float, l
     """(...) m/s by which the pelvis moved over the ground faster than `limit` this frame (0 when slower);
     previous_pelvis, pelvis: (..., 3) positions one frame (1 / fps s) apart."""
     return ((pelvis - previous_pelvis)[..., :2].norm(dim=-1) * fps - limit).clamp_min(0.0)
+
+
+def overlean(pelvis: torch.Tensor, neck: torch.Tensor, limit: float) -> torch.Tensor:
+    """(...) radians by which the trunk, pelvis (..., 3) to neck (..., 3), leans further than `limit` from vertical
+    (0 when more upright): a stooping body's measure that does not depend on its size."""
+    trunk = neck - pelvis
+    return (torch.atan2(trunk[..., :2].norm(dim=-1), trunk[..., 2]) - limit).clamp_min(0.0)
 
 
 def latent_cost(z: torch.Tensor) -> torch.Tensor:

@@ -13,6 +13,7 @@ from gymnasium.utils.env_checker import check_env
 
 import motion_envs  # noqa: F401  (registers the ids)
 from baselines.latent_controllers import RandomLatent
+from motion_envs.body.skeleton import joint_index
 from motion_envs.envs.gamma_wander import GammaWanderConfig, GammaWanderCore, GammaWanderEnv
 from motion_envs.priors.gamma_generator import GammaGenerator
 from motion_envs.scenes import FAMILIES, TEST_SEEDS, Scene, ScenePart, make_scene
@@ -155,11 +156,12 @@ def test_the_search_prunes_branches_that_walk_into_a_table(gamma):
     assert collisions[False] >= 16 and collisions[True] <= collisions[False] / 4, collisions
 
 
-def test_collision_clearance_and_speeding_penalties_are_paid_in_proportion(gamma):
+def test_collision_clearance_speeding_and_stooping_penalties_are_paid_in_proportion(gamma):
     """A body walking straight through a table: the same latents with and without the penalties move it alike (the
     reward does not feed back into the motion), and the rewards differ by exactly collision_penalty per colliding
-    primitive, clearance_penalty per metre inside the margin and speeding per frame and m/s that the pelvis is
-    faster than walk_speed (0.5 m/s here, so that an ordinary walk pays it)."""
+    primitive, clearance_penalty per metre inside the margin, speeding per frame and m/s that the pelvis is
+    faster than walk_speed (0.5 m/s here, so that an ordinary walk pays it) and stooping per frame and radian that
+    the trunk leans past upright_lean (0.05 rad here, for the same reason)."""
     from agents.controllers import PolicyLatent
     from motion_envs.priors.training import WEIGHTS_DIR
 
@@ -167,7 +169,8 @@ def test_collision_clearance_and_speeding_penalties_are_paid_in_proportion(gamma
     rewards, results = {}, {}
     for paid in (False, True):
         config = GammaWanderConfig(scene="flat", collision_penalty=4.0 * paid, clearance_penalty=10.0 * paid,
-                                   speeding=2.0 * paid, walk_speed=0.5, precision="float32")  # fmt: skip
+                                   speeding=2.0 * paid, walk_speed=0.5, stooping=3.0 * paid, upright_lean=0.05,
+                                   precision="float32")  # fmt: skip
         core = GammaWanderCore(config, gamma)
         slot = core.add_scene(_table_scene())
         state = core.initial_state(torch.tensor([0]), torch.tensor([0.0]), np.array([[3.0, 2.0]]),
@@ -181,20 +184,26 @@ def test_collision_clearance_and_speeding_penalties_are_paid_in_proportion(gamma
     collided = torch.cat([result.collided for result in results[True]])
     assert torch.equal(clearance, torch.cat([result.clearance for result in results[False]]))
     assert collided.sum() >= 2 and torch.isfinite(clearance).all()
-    over = []
+    over, lean = [], []
     for result in results[True]:
         pelvis = result.primitive.joints[:, :, 0, :2].double()
         speed = (pelvis[:, 1:] - pelvis[:, :-1]).norm(dim=-1) * 40.0
         new = torch.arange(1, pelvis.shape[1]) >= result.primitive.seed_frames[:, None]
         over.append(((speed - 0.5).clamp(min=0.0) * new).sum(dim=1).float())
-    over = torch.cat(over)
+        trunk = (result.primitive.joints[:, :, joint_index("neck")] - result.primitive.joints[:, :, 0]).double()
+        angle = torch.acos(trunk[..., 2] / trunk.norm(dim=-1))
+        lean.append(((angle - 0.05).clamp(min=0.0) * result.primitive.new_frames()).sum(dim=1).float())
+    over, lean = torch.cat(over), torch.cat(lean)
     assert (over > 0).sum() >= 6, over  # the body walks faster than 0.5 m/s in most primitives
-    expected = 4.0 * collided.float() + 10.0 * (0.1 - clearance).clamp(min=0.0) + 2.0 * over
+    assert (lean > 0).sum() >= 6, lean  # and leans more than 3 degrees
+    expected = 4.0 * collided.float() + 10.0 * (0.1 - clearance).clamp(min=0.0) + 2.0 * over + 3.0 * lean
     assert torch.allclose(torch.cat(rewards[False]) - torch.cat(rewards[True]), expected, atol=1e-3)
     with pytest.raises(ValueError, match="clearance_penalty"):
         GammaWanderConfig(clearance_penalty=-1.0)
     with pytest.raises(ValueError, match="walk_speed"):
         GammaWanderConfig(walk_speed=0.0)
+    with pytest.raises(ValueError, match="stooping"):
+        GammaWanderConfig(stooping=-1.0)
 
 
 def test_populate_end_to_end_writes_a_rollout_a_video_and_views_from_above(tmp_path):

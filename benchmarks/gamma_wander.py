@@ -5,6 +5,10 @@
    (`GammaWanderCore.flat_path`). A path succeeds when the pelvis ends a primitive within 0.3 m of the last
    waypoint after passing the others in order (0.75 m). Every path runs twice: 32 clones moving together
    (GAMMA's Table 1 protocol: success when any clone arrives) and `repeats` single bodies (per-body success).
+   The WANDR row walks the same paths with WANDR's sampler (z ~ N(0, I) every frame) on the shipped WANDR
+   prior, the pelvis goal handed over as a wrist goal (`baselines.wandr_waypoints`: the paper's C.3 extension
+   at inference time, each waypoint asked for at 3 m/s because the prior walks at about half the pace it is
+   asked), one body per path and repeat, for as long as the GAMMA rows get (40 s).
 2. **Rooms**: `rooms` held-out rooms per layout family (`TEST_SEEDS`), start and goal at the far ends of the
    walkable region (`scenes.paths.far_ends`), one body per room. Collisions: share of primitives in which a
    body sphere is more than 2 cm inside furniture or a wall, and per second of motion. The "straight at the
@@ -31,11 +35,15 @@ from tqdm import tqdm
 
 from agents.controllers import PolicyLatent
 from baselines.latent_controllers import RandomLatent
+from baselines.wandr_sampler import WandrSampler
+from baselines.wandr_waypoints import follow_waypoints
 from benchmarks.gamma_control import Recorder, run_clones, run_search
 from benchmarks.machine import machine_line
 from motion_envs.atomic import atomic_write
 from motion_envs.envs.gamma_wander import GammaWanderConfig, GammaWanderCore, GammaWanderState
+from motion_envs.envs.wandr_reach import WandrReachConfig, WandrReachCore
 from motion_envs.plots import grid_of_axes, save, top_down
+from motion_envs.priors.wandr_features import FPS as WANDR_FPS
 from motion_envs.populate import PRIMITIVE_SECONDS, populate
 from motion_envs.priors.training import WEIGHTS_DIR
 from motion_envs.scenes.layouts import FAMILIES, TEST_SEEDS, make_scene
@@ -100,6 +108,22 @@ def run_row(core: GammaWanderCore, start: GammaWanderState, row: str, seed: int,
     return figures(recorded, time.perf_counter() - began)
 
 
+def wandr_row(start: GammaWanderState, max_primitives: int, seed: int) -> dict:
+    """WANDR's sampler walking the waypoints of `start` (open ground), one body each, from random start rows and
+    headings, for as many seconds as `max_primitives` GAMMA primitives last."""
+    began = time.perf_counter()
+    core = WandrReachCore(WandrReachConfig())
+    rng = np.random.default_rng([seed, start.num_bodies])
+    rows = torch.as_tensor(rng.integers(core.num_starts, size=start.num_bodies))
+    facing = torch.as_tensor(rng.uniform(-np.pi, np.pi, start.num_bodies), dtype=torch.float32)
+    walk = follow_waypoints(core, rows, facing, start.waypoints, start.count, WandrSampler(1.0, seed),
+                            max_frames=round(max_primitives * PRIMITIVE_SECONDS * WANDR_FPS))  # fmt: skip
+    reached = walk.reached
+    return {"success": float(reached.float().mean()), "time": float(walk.frames[reached].float().mean() / WANDR_FPS)
+            if reached.any() else float("nan"), "left": float(walk.distance.mean()), "contact": float("nan"),
+            "FS": float(walk.skated.sum() / walk.frames.sum()), "seconds": time.perf_counter() - began}  # fmt: skip
+
+
 def flat_paths(core: GammaWanderCore, count: int, seed: int) -> GammaWanderState:
     """The fixed open-ground paths (path i is the same for any `count`)."""
     return core.sample_initial_state([np.random.default_rng([seed, path]) for path in range(count)])
@@ -146,6 +170,7 @@ def main(paths: int = 100, clones: int = 32, repeats: int = 4, rooms: int = 100,
             flat[name] = run_row(flat_core, bodies, "policy", seed, body_clones, policy)
     for row in (f"{main_label} & top1 distance", f"{main_label} & top1 release", "random z & top4 distance"):
         flat[row] = run_row(flat_core, start, row, seed, policy=main_policy)
+    flat["WANDR sampler, pelvis goals (ours), one body"] = wandr_row(start.repeat(repeats), flat_core.config.max_primitives, seed)
     flat_columns = ("success", "time", "left", "contact", "FS", "seconds")
 
     room_cores = {family: GammaWanderCore(GammaWanderConfig(scene=family, max_primitives=160), flat_core.generator)

@@ -255,3 +255,27 @@ def test_a_learned_prior_starts_as_n01_then_learns_from_the_condition(walking_mo
                                 run_dir=tmp_path / "plain", weights=tmp_path / "plain.pt")  # fmt: skip
     with pytest.raises(ValueError, match="not the same network"):  # a prior network cannot be dropped silently
         train_wandr(plain, clips, clips)
+
+
+def test_pelvis_goals_walk_waypoints_and_the_asked_pace_matters(shipped):
+    """WANDR following a two-waypoint path 3 m straight ahead with pelvis goals (`baselines.wandr_waypoints`): the
+    wrist goal it is handed asks for exactly the pelvis's path to the waypoint; at the shipped pace most bodies
+    walk the path and stop there, while a pace of 0.1 m/s leaves every body short of it after the same 10 s."""
+    from baselines.wandr_waypoints import follow_waypoints, pelvis_goal_as_wrist_goal
+
+    core = WandrReachCore(WandrReachConfig(), shipped)
+    count = 8
+    rows, facing = torch.arange(count) % core.num_starts, torch.linspace(-3.0, 3.0, count)
+    forward = core.starts.forward(rows, facing)
+    forward = forward / forward.norm(dim=-1, keepdim=True)
+    waypoints = forward[:, None] * torch.tensor([1.5, 3.0])[None, :, None]  # (8, 2, 2)
+    body = core.initial_state(rows, facing, torch.zeros(count, 1, 3)).body
+    wrist_goal = pelvis_goal_as_wrist_goal(body, waypoints[:, 0])
+    offset = wrist_goal - body.joints[:, RIGHT_WRIST]
+    assert torch.allclose(offset[:, :2], waypoints[:, 0] - body.joints[:, PELVIS, :2], atol=1e-5)
+    assert torch.allclose(offset[:, 2], torch.zeros(count))
+    walks = {pace: follow_waypoints(core, rows, facing, waypoints, torch.full((count,), 2), WandrSampler(seed=0), 300, pace=pace)
+             for pace in (3.0, 0.1)}  # fmt: skip
+    assert walks[3.0].reached.sum() >= 6, walks[3.0]  # measured: 8 of 8
+    assert (walks[3.0].frames[walks[3.0].reached] < 300).all() and (walks[3.0].distance[walks[3.0].reached] <= 0.3).all()
+    assert not walks[0.1].reached.any() and (walks[0.1].distance > 0.5).all(), walks[0.1]

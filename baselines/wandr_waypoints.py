@@ -22,6 +22,7 @@ from motion_envs.batched import where_bodies
 from motion_envs.envs.wandr_reach import WandrReachCore
 from motion_envs.metrics import track_skating
 from motion_envs.priors.wandr_features import FPS, PELVIS, RIGHT_WRIST, WandrState
+from motion_envs.rewards import UPRIGHT_LEAN, overlean
 
 ASKED_PACE = 3.0
 """m/s the deadline asks for. The shipped prior walks at about half the pace its intention asks (`bench
@@ -33,12 +34,13 @@ walks 23 / 77 / 100% of them, the last in 14.6 s (about 0.9 m/s over the ground)
 class WaypointWalk:
     """N bodies' waypoint walks. reached: (N,) bool; frames: (N,) frames walked (to arrival, or all); skated:
     (N,) frames whose lowest foot vertex slid (WANDR's FS); distance: (N,) metres left along the path at the end
-    (at most `goal_radius` for the bodies that arrived)."""
+    (at most `goal_radius` for the bodies that arrived); stooped: (N,) frames whose trunk leant past `UPRIGHT_LEAN`."""
 
     reached: torch.Tensor
     frames: torch.Tensor
     skated: torch.Tensor
     distance: torch.Tensor
+    stooped: torch.Tensor
 
 
 def pelvis_goal_as_wrist_goal(state: WandrState, waypoint: torch.Tensor) -> torch.Tensor:
@@ -62,7 +64,7 @@ def follow_waypoints(core: WandrReachCore, start_index: torch.Tensor, facing: to
     body, current = state.body, torch.zeros_like(count)
     lowest_id, lowest_xy = state.lowest_id, state.lowest_xy
     active = torch.ones_like(count, dtype=torch.bool)
-    frames, skated = torch.zeros_like(count), torch.zeros_like(count)
+    frames, skated, stooped = torch.zeros_like(count), torch.zeros_like(count), torch.zeros_like(count)
     for _ in range(max_frames):
         if not active.any():
             break
@@ -73,7 +75,8 @@ def follow_waypoints(core: WandrReachCore, start_index: torch.Tensor, facing: to
         moved, feet = core.stepper.step(body, z, pelvis_goal_as_wrist_goal(body, waypoint), frames_left)
         slid, lowest_id, lowest_xy = track_skating(feet, lowest_id, lowest_xy, active)
         body = WandrState(*(where_bodies(active, new, old) for new, old in zip(moved, body)))
-        frames, skated = frames + active.long(), skated + slid.long()
+        leaning = overlean(body.joints, UPRIGHT_LEAN) > 0
+        frames, skated, stooped = frames + active.long(), skated + slid.long(), stooped + (leaning & active).long()
         distance = (waypoint - body.joints[:, PELVIS, :2]).norm(dim=-1)
         last = current >= count - 1
         arrived = active & last & (distance <= goal_radius)
@@ -84,4 +87,4 @@ def follow_waypoints(core: WandrReachCore, start_index: torch.Tensor, facing: to
     after = (legs * (torch.arange(1, waypoints.shape[1], device=device) > current[:, None])).sum(dim=1)
     left = (waypoint - body.joints[:, PELVIS, :2]).norm(dim=-1) + after
     reached = ~active
-    return WaypointWalk(reached.cpu(), frames.cpu(), skated.cpu(), left.cpu())
+    return WaypointWalk(reached.cpu(), frames.cpu(), skated.cpu(), left.cpu(), stooped.cpu())

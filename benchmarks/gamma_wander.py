@@ -17,7 +17,8 @@
 3. **Crowd**: 16 bodies for 30 s in `living:1003` (`motion_envs.populate`).
 
 Time to arrive: seconds of motion to success (successful paths). Contact score: GAMMA Eq. 11; FS: WANDR's
-(40 fps, 0.2 m/s). Floor distance is not reported: the env's floor rule (`ground_feet`) puts the lowest sole
+(40 fps, 0.2 m/s). Stooped frames: share of generated frames whose trunk (pelvis to neck) leans more than 15°
+from vertical (`rewards.UPRIGHT_LEAN`; the clean data's walking frames: 8% in the test split, 19% in training). Floor distance is not reported: the env's floor rule (`ground_feet`) puts the lowest sole
 point of every frame on the ground, by construction. Search rows: 16 roots, 4 children per node, the top 1 or
 4 nodes kept per level (the release keeps 4), the node cost with the scene's collision and clearance terms
 (`SearchCost`: a branch that touched furniture is pruned while another is left), and distance alone or the
@@ -46,6 +47,7 @@ from motion_envs.plots import grid_of_axes, save, top_down
 from motion_envs.priors.wandr_features import FPS as WANDR_FPS
 from motion_envs.populate import PRIMITIVE_SECONDS, populate
 from motion_envs.priors.training import WEIGHTS_DIR
+from motion_envs.rewards import UPRIGHT_LEAN, overlean
 from motion_envs.scenes.layouts import FAMILIES, TEST_SEEDS, make_scene
 from motion_envs.scenes.paths import far_ends
 from motion_envs.wrappers.tree_search import SearchCost, SearchSettings
@@ -57,19 +59,25 @@ COSTS = {"distance": SearchCost.distance_only(), "release": SearchCost()}
 
 
 class WanderRecorder(Recorder):
-    """`Recorder` plus the share of primitives that collided with the scene."""
+    """`Recorder` plus the share of primitives that collided with the scene and of new frames whose trunk leans
+    past `UPRIGHT_LEAN`."""
 
     def __init__(self, core: GammaWanderCore, start: GammaWanderState, horizon: int) -> None:
         super().__init__(core, start, horizon)
         self.collided: list[torch.Tensor] = []
+        self.stooped: list[tuple[float, int]] = []
 
     def add(self, step: int, result, rows: torch.Tensor, every: int = 1) -> None:
         super().add(step, result, rows, every)
         self.collided.append(result.collided.float().cpu())
+        new = result.primitive.new_frames()
+        leaning = overlean(result.primitive.joints, UPRIGHT_LEAN) > 0
+        self.stooped.append((float((leaning & new).sum()), int(new.sum())))
 
     def row(self, steps: torch.Tensor, reached: torch.Tensor, distance: torch.Tensor) -> dict:
         collided = torch.cat(self.collided)
-        return {**super().row(steps, reached, distance), "collided": (float(collided.sum()), len(collided))}
+        return {**super().row(steps, reached, distance), "collided": (float(collided.sum()), len(collided)),
+                "stooped": tuple(map(sum, zip(*self.stooped)))}  # fmt: skip
 
 
 def figures(row: dict, seconds: float) -> dict:
@@ -83,6 +91,7 @@ def figures(row: dict, seconds: float) -> dict:
         "collisions per s": row["collided"][0] / (row["collided"][1] * PRIMITIVE_SECONDS),
         "contact": row["contact"][0] / row["contact"][1],
         "FS": row["skating"][0] / row["skating"][1],
+        "stooped": row["stooped"][0] / row["stooped"][1],
         "seconds": seconds,
         "paths": row["paths"],
     }
@@ -121,7 +130,8 @@ def wandr_row(start: GammaWanderState, max_primitives: int, seed: int) -> dict:
     reached = walk.reached
     return {"success": float(reached.float().mean()), "time": float(walk.frames[reached].float().mean() / WANDR_FPS)
             if reached.any() else float("nan"), "left": float(walk.distance.mean()), "contact": float("nan"),
-            "FS": float(walk.skated.sum() / walk.frames.sum()), "seconds": time.perf_counter() - began}  # fmt: skip
+            "FS": float(walk.skated.sum() / walk.frames.sum()),
+            "stooped": float(walk.stooped.sum() / walk.frames.sum()), "seconds": time.perf_counter() - began}  # fmt: skip
 
 
 def flat_paths(core: GammaWanderCore, count: int, seed: int) -> GammaWanderState:
@@ -143,7 +153,7 @@ def room_starts(core: GammaWanderCore, rooms: int, seed: int, straight: bool) ->
 
 def table(rows: dict[str, dict], columns: tuple[str, ...]) -> list[str]:
     header = {"success": "success ↑", "time": "time (s) ↓", "left": "m left ↓", "collisions": "collided primitives ↓",
-              "collisions per s": "collisions / s ↓", "contact": "contact ↑", "FS": "FS ↓", "seconds": "seconds"}  # fmt: skip
+              "collisions per s": "collisions / s ↓", "contact": "contact ↑", "FS": "FS ↓", "stooped": "stooped frames ↓", "seconds": "seconds"}  # fmt: skip
     lines = ["| row | " + " | ".join(header[name] for name in columns) + " |", "|---" * (len(columns) + 1) + "|"]
     for name, row in rows.items():
         cells = ["–" if np.isnan(row[c]) else f"{row[c]:.0f}" if c == "seconds" else f"{row[c]:.3f}" for c in columns]
@@ -171,7 +181,7 @@ def main(paths: int = 100, clones: int = 32, repeats: int = 4, rooms: int = 100,
     for row in (f"{main_label} & top1 distance", f"{main_label} & top1 release", "random z & top4 distance"):
         flat[row] = run_row(flat_core, start, row, seed, policy=main_policy)
     flat["WANDR sampler, pelvis goals (ours), one body"] = wandr_row(start.repeat(repeats), flat_core.config.max_primitives, seed)
-    flat_columns = ("success", "time", "left", "contact", "FS", "seconds")
+    flat_columns = ("success", "time", "left", "contact", "FS", "stooped", "seconds")
 
     room_cores = {family: GammaWanderCore(GammaWanderConfig(scene=family, max_primitives=160), flat_core.generator)
                   for family in FAMILIES}  # fmt: skip
@@ -185,7 +195,7 @@ def main(paths: int = 100, clones: int = 32, repeats: int = 4, rooms: int = 100,
         for row in ("policy & top1 distance", "policy & top4 distance", "policy & top1 release", "random z & top4 distance"):
             name = row.replace("policy", main_label) + ", planned path"
             rooms_rows[family][name] = run_row(room_core, planned, row, seed, policy=main_policy)
-    room_columns = ("success", "time", "left", "collisions", "collisions per s", "FS", "seconds")
+    room_columns = ("success", "time", "left", "collisions", "collisions per s", "FS", "stooped", "seconds")
 
     crowd = populate(make_scene("living", 1003), PolicyLatent(main_policy, seed=seed), 16, crowd_seconds, seed,
                      scene_spec="living:1003", core=room_cores["living"], progress=False)  # fmt: skip

@@ -33,7 +33,9 @@ from typing import TypeVar
 import torch
 
 from motion_envs.body.canonical_frame import LEFT_HIP, PELVIS, RIGHT_HIP
+from motion_envs.body.skeleton import joint_index
 
+NECK = joint_index("neck")
 
 DATA_WALK_SPEED = 2.1
 """m/s: the data's fastest walking (no half-second window of the CMU test walks is faster); the speeding terms'
@@ -195,10 +197,10 @@ def overspeed(previous_pelvis: torch.Tensor, pelvis: torch.Tensor, fps: float, l
     return ((pelvis - previous_pelvis)[..., :2].norm(dim=-1) * fps - limit).clamp_min(0.0)
 
 
-def overlean(pelvis: torch.Tensor, neck: torch.Tensor, limit: float) -> torch.Tensor:
-    """(...) radians by which the trunk, pelvis (..., 3) to neck (..., 3), leans further than `limit` from vertical
-    (0 when more upright): a stooping body's measure that does not depend on its size."""
-    trunk = neck - pelvis
+def overlean(joints: torch.Tensor, limit: float) -> torch.Tensor:
+    """(...) radians by which the trunk (pelvis to neck) of bodies with joints (..., 22, 3) leans further than
+    `limit` from vertical (0 when more upright): a stooping body's measure that does not depend on its size."""
+    trunk = joints[..., NECK, :] - joints[..., PELVIS, :]
     return (torch.atan2(trunk[..., :2].norm(dim=-1), trunk[..., 2]) - limit).clamp_min(0.0)
 
 

@@ -81,7 +81,6 @@ from motion_envs.envs.options import check_known, index, number, point, scene_se
 from motion_envs.precision import PRECISIONS
 from motion_envs.priors.gamma_generator import GammaGenerator, GammaSeed, Primitive
 from motion_envs.render.env_view import RenderInputs
-from motion_envs.body.skeleton import joint_index
 from motion_envs.rewards import DATA_WALK_SPEED, UPRIGHT_LEAN, RewardConfig, goal_absorbing_reward, overlean, overspeed
 from motion_envs.scenes.layouts import FAMILIES, TRAIN_SEEDS, families_of, make_scene, seeds_of
 from motion_envs.scenes.paths import cell_costs, plan_path, split_legs
@@ -91,7 +90,6 @@ FLAT, MIXED = "flat", "mixed"
 MAX_WAYPOINTS = 64
 """Waypoints a path may have (padded to this in the state, so that bodies batch)."""
 RESET_OPTIONS = ("scene_seed", "start", "goal", "waypoints", "facing", "start_index")
-NECK = joint_index("neck")
 PERSONAL_SPACE = 0.6
 """Pelvis-to-pelvis distance (m) under which two bodies crowd each other (`GammaWanderStepResult.crowding`)."""
 
@@ -402,7 +400,7 @@ class GammaWanderCore:
         remaining = (config.max_primitives - reach.steps).to(moved.reward.dtype)
         pelvis_path = moved.primitive.joints[:, :, PELVIS]  # (N, 10, 3); the steps into new frames are paid
         speeding = overspeed(pelvis_path[:, :-1], pelvis_path[:, 1:], GAMMA_FPS, config.walk_speed)
-        stooping = overlean(pelvis_path, moved.primitive.joints[:, :, NECK], config.upright_lean)  # (N, 10)
+        stooping = overlean(moved.primitive.joints, config.upright_lean)  # (N, 10)
         terms = {**moved.terms, "collision": -collided.float(),
                  "clearance": -(config.clearance_margin - clearance).clamp(min=0.0),
                  "speeding": -(speeding * moved.primitive.new_frames()[:, 1:]).sum(dim=1),

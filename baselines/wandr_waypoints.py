@@ -22,7 +22,7 @@ from motion_envs.batched import where_bodies
 from motion_envs.envs.wandr_reach import WandrReachCore
 from motion_envs.metrics import track_skating
 from motion_envs.priors.wandr_features import FPS, PELVIS, RIGHT_WRIST, WandrState
-from motion_envs.rewards import UPRIGHT_LEAN, overlean
+from motion_envs.rewards import UPRIGHT_HEAD, head_drop
 
 ASKED_PACE = 3.0
 """m/s the deadline asks for. The shipped prior walks at about half the pace its intention asks (`bench
@@ -34,7 +34,7 @@ walks 23 / 77 / 100% of them, the last in 14.6 s (about 0.9 m/s over the ground)
 class WaypointWalk:
     """N bodies' waypoint walks. reached: (N,) bool; frames: (N,) frames walked (to arrival, or all); skated:
     (N,) frames whose lowest foot vertex slid (WANDR's FS); distance: (N,) metres left along the path at the end
-    (at most `goal_radius` for the bodies that arrived); stooped: (N,) frames whose trunk leant past `UPRIGHT_LEAN`."""
+    (at most `goal_radius` for the bodies that arrived); stooped: (N,) frames with the head lower than `UPRIGHT_HEAD`."""
 
     reached: torch.Tensor
     frames: torch.Tensor
@@ -75,8 +75,8 @@ def follow_waypoints(core: WandrReachCore, start_index: torch.Tensor, facing: to
         moved, feet = core.stepper.step(body, z, pelvis_goal_as_wrist_goal(body, waypoint), frames_left)
         slid, lowest_id, lowest_xy = track_skating(feet, lowest_id, lowest_xy, active)
         body = WandrState(*(where_bodies(active, new, old) for new, old in zip(moved, body)))
-        leaning = overlean(body.joints, UPRIGHT_LEAN) > 0
-        frames, skated, stooped = frames + active.long(), skated + slid.long(), stooped + (leaning & active).long()
+        low = head_drop(body.joints, UPRIGHT_HEAD) > 0
+        frames, skated, stooped = frames + active.long(), skated + slid.long(), stooped + (low & active).long()
         distance = (waypoint - body.joints[:, PELVIS, :2]).norm(dim=-1)
         last = current >= count - 1
         arrived = active & last & (distance <= goal_radius)

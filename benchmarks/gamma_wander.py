@@ -17,8 +17,8 @@
 3. **Crowd**: 16 bodies for 30 s in `living:1003` (`motion_envs.populate`).
 
 Time to arrive: seconds of motion to success (successful paths). Contact score: GAMMA Eq. 11; FS: WANDR's
-(40 fps, 0.2 m/s). Stooped frames: share of generated frames whose trunk (pelvis to neck) leans more than 15°
-from vertical (`rewards.UPRIGHT_LEAN`; the clean data's walking frames: 8% in the test split, 19% in training). Floor distance is not reported: the env's floor rule (`ground_feet`) puts the lowest sole
+(40 fps, 0.2 m/s). Head low: share of generated frames with the head lower than 1.38 m (`rewards.UPRIGHT_HEAD`; a stooping or
+crouching body; the clean data's walking frames: 15% in the test split, 27% in training). Floor distance is not reported: the env's floor rule (`ground_feet`) puts the lowest sole
 point of every frame on the ground, by construction. Search rows: 16 roots, 4 children per node, the top 1 or
 4 nodes kept per level (the release keeps 4), the node cost with the scene's collision and clearance terms
 (`SearchCost`: a branch that touched furniture is pruned while another is left), and distance alone or the
@@ -47,7 +47,7 @@ from motion_envs.plots import grid_of_axes, save, top_down
 from motion_envs.priors.wandr_features import FPS as WANDR_FPS
 from motion_envs.populate import PRIMITIVE_SECONDS, populate
 from motion_envs.priors.training import WEIGHTS_DIR
-from motion_envs.rewards import UPRIGHT_LEAN, overlean
+from motion_envs.rewards import UPRIGHT_HEAD, head_drop
 from motion_envs.scenes.layouts import FAMILIES, TEST_SEEDS, make_scene
 from motion_envs.scenes.paths import far_ends
 from motion_envs.wrappers.tree_search import SearchCost, SearchSettings
@@ -59,8 +59,8 @@ COSTS = {"distance": SearchCost.distance_only(), "release": SearchCost()}
 
 
 class WanderRecorder(Recorder):
-    """`Recorder` plus the share of primitives that collided with the scene and of new frames whose trunk leans
-    past `UPRIGHT_LEAN`."""
+    """`Recorder` plus the share of primitives that collided with the scene and of new frames whose head is lower
+    than `UPRIGHT_HEAD`."""
 
     def __init__(self, core: GammaWanderCore, start: GammaWanderState, horizon: int) -> None:
         super().__init__(core, start, horizon)
@@ -71,8 +71,8 @@ class WanderRecorder(Recorder):
         super().add(step, result, rows, every)
         self.collided.append(result.collided.float().cpu())
         new = result.primitive.new_frames()
-        leaning = overlean(result.primitive.joints, UPRIGHT_LEAN) > 0
-        self.stooped.append((float((leaning & new).sum()), int(new.sum())))
+        low = head_drop(result.primitive.joints, UPRIGHT_HEAD) > 0
+        self.stooped.append((float((low & new).sum()), int(new.sum())))
 
     def row(self, steps: torch.Tensor, reached: torch.Tensor, distance: torch.Tensor) -> dict:
         collided = torch.cat(self.collided)
@@ -153,7 +153,7 @@ def room_starts(core: GammaWanderCore, rooms: int, seed: int, straight: bool) ->
 
 def table(rows: dict[str, dict], columns: tuple[str, ...]) -> list[str]:
     header = {"success": "success ↑", "time": "time (s) ↓", "left": "m left ↓", "collisions": "collided primitives ↓",
-              "collisions per s": "collisions / s ↓", "contact": "contact ↑", "FS": "FS ↓", "stooped": "stooped frames ↓", "seconds": "seconds"}  # fmt: skip
+              "collisions per s": "collisions / s ↓", "contact": "contact ↑", "FS": "FS ↓", "stooped": "head low ↓", "seconds": "seconds"}  # fmt: skip
     lines = ["| row | " + " | ".join(header[name] for name in columns) + " |", "|---" * (len(columns) + 1) + "|"]
     for name, row in rows.items():
         cells = ["–" if np.isnan(row[c]) else f"{row[c]:.0f}" if c == "seconds" else f"{row[c]:.3f}" for c in columns]

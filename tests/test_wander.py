@@ -160,8 +160,8 @@ def test_collision_clearance_speeding_and_stooping_penalties_are_paid_in_proport
     """A body walking straight through a table: the same latents with and without the penalties move it alike (the
     reward does not feed back into the motion), and the rewards differ by exactly collision_penalty per colliding
     primitive, clearance_penalty per metre inside the margin, speeding per frame and m/s that the pelvis is
-    faster than walk_speed (0.5 m/s here, so that an ordinary walk pays it) and stooping per frame and radian that
-    the trunk leans past upright_lean (0.05 rad here, for the same reason)."""
+    faster than walk_speed (0.5 m/s here, so that an ordinary walk pays it) and stooping per frame and metre that
+    the head is lower than upright_head (1.6 m here, for the same reason)."""
     from agents.controllers import PolicyLatent
     from motion_envs.priors.training import WEIGHTS_DIR
 
@@ -169,7 +169,7 @@ def test_collision_clearance_speeding_and_stooping_penalties_are_paid_in_proport
     rewards, results = {}, {}
     for paid in (False, True):
         config = GammaWanderConfig(scene="flat", collision_penalty=4.0 * paid, clearance_penalty=10.0 * paid,
-                                   speeding=2.0 * paid, walk_speed=0.5, stooping=3.0 * paid, upright_lean=0.05,
+                                   speeding=2.0 * paid, walk_speed=0.5, stooping=3.0 * paid, upright_head=1.6,
                                    precision="float32")  # fmt: skip
         core = GammaWanderCore(config, gamma)
         slot = core.add_scene(_table_scene())
@@ -184,19 +184,18 @@ def test_collision_clearance_speeding_and_stooping_penalties_are_paid_in_proport
     collided = torch.cat([result.collided for result in results[True]])
     assert torch.equal(clearance, torch.cat([result.clearance for result in results[False]]))
     assert collided.sum() >= 2 and torch.isfinite(clearance).all()
-    over, lean = [], []
+    over, low = [], []
     for result in results[True]:
         pelvis = result.primitive.joints[:, :, 0, :2].double()
         speed = (pelvis[:, 1:] - pelvis[:, :-1]).norm(dim=-1) * 40.0
         new = torch.arange(1, pelvis.shape[1]) >= result.primitive.seed_frames[:, None]
         over.append(((speed - 0.5).clamp(min=0.0) * new).sum(dim=1).float())
-        trunk = (result.primitive.joints[:, :, joint_index("neck")] - result.primitive.joints[:, :, 0]).double()
-        angle = torch.acos(trunk[..., 2] / trunk.norm(dim=-1))
-        lean.append(((angle - 0.05).clamp(min=0.0) * result.primitive.new_frames()).sum(dim=1).float())
-    over, lean = torch.cat(over), torch.cat(lean)
+        head = result.primitive.joints[:, :, joint_index("head"), 2].double()
+        low.append(((1.6 - head).clamp(min=0.0) * result.primitive.new_frames()).sum(dim=1).float())
+    over, low = torch.cat(over), torch.cat(low)
     assert (over > 0).sum() >= 6, over  # the body walks faster than 0.5 m/s in most primitives
-    assert (lean > 0).sum() >= 6, lean  # and leans more than 3 degrees
-    expected = 4.0 * collided.float() + 10.0 * (0.1 - clearance).clamp(min=0.0) + 2.0 * over + 3.0 * lean
+    assert (low > 0).sum() >= 6, low  # and its head is lower than 1.6 m
+    expected = 4.0 * collided.float() + 10.0 * (0.1 - clearance).clamp(min=0.0) + 2.0 * over + 3.0 * low
     assert torch.allclose(torch.cat(rewards[False]) - torch.cat(rewards[True]), expected, atol=1e-3)
     with pytest.raises(ValueError, match="clearance_penalty"):
         GammaWanderConfig(clearance_penalty=-1.0)

@@ -224,10 +224,7 @@ class GammaWanderState(BatchedState):
 
     def distance_left(self, pelvis_xy: torch.Tensor) -> torch.Tensor:
         """(N,) metres from `pelvis_xy` (N, 2) to the current waypoint, then along the rest of the path."""
-        legs = (self.waypoints[:, 1:] - self.waypoints[:, :-1]).norm(dim=-1)  # padding adds 0-length legs
-        after = torch.cat([legs.flip(1).cumsum(1).flip(1), torch.zeros_like(legs[:, :1])], dim=1)
-        current = self.waypoints.gather(1, self.current[:, None, None].expand(-1, 1, 2))[:, 0]
-        return (pelvis_xy - current).norm(dim=-1) + after.gather(1, self.current[:, None])[:, 0]
+        return distance_along_path(self.waypoints, self.current, pelvis_xy)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -448,6 +445,15 @@ class GammaWanderCore:
             ahead = waypoints[current:count]
             paths.append(np.concatenate([ahead, np.zeros((len(ahead), 1))], axis=1))
         return paths
+
+
+def distance_along_path(waypoints: torch.Tensor, current: torch.Tensor, xy: torch.Tensor) -> torch.Tensor:
+    """(N,) metres from points `xy` (N, 2) to waypoint `current` (N,) of paths `waypoints` (N, W, 2), then along the
+    rest of each path; paths shorter than W are padded with their last waypoint (0-length legs)."""
+    legs = (waypoints[:, 1:] - waypoints[:, :-1]).norm(dim=-1)
+    after = torch.cat([legs.flip(1).cumsum(1).flip(1), torch.zeros_like(legs[:, :1])], dim=1)
+    target = waypoints.gather(1, current[:, None, None].expand(-1, 1, 2))[:, 0]
+    return (xy - target).norm(dim=-1) + after.gather(1, current[:, None])[:, 0]
 
 
 def crowding_depth(pelvis: torch.Tensor, neighbours: torch.Tensor) -> torch.Tensor:

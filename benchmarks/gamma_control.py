@@ -10,7 +10,10 @@ after 60 primitives. Per row:
 * success rate: pairs where any clone reached the goal;
 * avg. dist.: pelvis-goal ground distance of all clones when the pair ends;
 * contact score: GAMMA Eq. 11 over every generated primitive;
-* FS: WANDR's foot skating at 40 fps with its 0.2 m/s threshold.
+* FS: WANDR's foot skating at 40 fps with its 0.2 m/s threshold;
+* head low: the share of generated frames whose head is lower than 1.38 m
+  (`rewards.UPRIGHT_HEAD`: a stooping or crouching body; the clean data's
+  walking frames 15% in the test split, 27% in training).
 
 Tree-search rows ("& topK", `motion_envs.wrappers.tree_search`) run one
 search per pair (16 roots, 4 children per node, K kept); their "clones" are
@@ -56,6 +59,7 @@ from motion_envs.body.markers import foot_vertex_ids
 from motion_envs.data.primitives import GAMMA_FPS
 from motion_envs.envs.gamma_reach import GammaReachConfig, GammaReachCore, GammaReachState, GammaStepResult
 from motion_envs.metrics import foot_skating, skating_threshold
+from motion_envs.rewards import UPRIGHT_HEAD, head_drop
 from motion_envs.body.canonical_frame import PELVIS
 from motion_envs.priors.training import WEIGHTS_DIR
 from motion_envs.rewards import facing_direction
@@ -79,12 +83,13 @@ def fixed_pairs(core: GammaReachCore, pairs: int | range, seed: int) -> GammaRea
 
 
 class Recorder:
-    """Contact score, foot skating and the pelvis path of the primitives a row generates."""
+    """Contact score, foot skating, frames with the head low and the pelvis path of the primitives a row generates."""
 
     def __init__(self, core: GammaReachCore, start: GammaReachState, horizon: int) -> None:
         self.body, self.feet_ids = core.generator.body, foot_vertex_ids()
         self.contact: list[torch.Tensor] = []
         self.skating: list[torch.Tensor] = []
+        self.stooped: list[tuple[float, int]] = []
         self.paths = torch.full((start.num_bodies, horizon + 1, 2), float("nan"))  # pelvis after every primitive
         self.paths[:, 0] = start.seed.joints[:, -1, PELVIS, :2]
 
@@ -95,26 +100,30 @@ class Recorder:
         feet = self.body.skin(self.body(primitive.transl, primitive.global_orient, primitive.body_pose), self.feet_ids)
         first = 0 if step == 0 else 1  # transitions from the last seed frame on (start pose: 1-frame seed)
         self.skating.append(foot_skating(feet[:, first:], skating_threshold(GAMMA_FPS)).float().flatten())
+        new, low = primitive.new_frames(), head_drop(primitive.joints, UPRIGHT_HEAD) > 0
+        self.stooped.append((float((low & new).sum()), int(new.sum())))
         self.paths[rows, step + 1] = primitive.joints[::every, -1, PELVIS, :2].cpu()
 
     def row(self, steps: torch.Tensor, reached: torch.Tensor, distance: torch.Tensor) -> dict:
         """The pairs' figures as `summarise` merges them: per pair (steps, reached, distance, paths) and the
-        per-primitive contact scores and skating flags as sums and counts."""
+        per-primitive contact scores, skating flags and head-low frames as sums and counts."""
         contact, skating = torch.cat(self.contact), torch.cat(self.skating)
         return {"steps": steps.numpy(), "reached": reached.numpy(), "distance": distance.numpy(), "paths": self.paths.numpy(),
-                "contact": (float(contact.sum()), len(contact)), "skating": (float(skating.sum()), len(skating))}  # fmt: skip
+                "contact": (float(contact.sum()), len(contact)), "skating": (float(skating.sum()), len(skating)),
+                "stooped": tuple(map(sum, zip(*self.stooped)))}  # fmt: skip
 
 
 def summarise(parts: list[dict]) -> dict:
     """A row's figures from its shards' `Recorder.row`s, in pair order."""
     steps, reached = np.concatenate([part["steps"] for part in parts]), np.concatenate([part["reached"] for part in parts])
-    contact, skating = (tuple(map(sum, zip(*(part[key] for part in parts)))) for key in ("contact", "skating"))
+    contact, skating, stooped = (tuple(map(sum, zip(*(part[key] for part in parts)))) for key in ("contact", "skating", "stooped"))
     return {
         "steps": float(steps[reached].mean()) if reached.any() else float("nan"),
         "success rate": float(reached.mean()),
         "avg. dist.": float(np.concatenate([part["distance"] for part in parts]).mean()),
         "contact score": contact[0] / contact[1],
         "FS": skating[0] / skating[1],
+        "head low": stooped[0] / stooped[1],
         "paths": np.concatenate([part["paths"] for part in parts]),
         "seconds": sum(part.get("seconds", 0.0) for part in parts),
         **({"per body": np.concatenate([part["per body"] for part in parts])} if "per body" in parts[0] else {}),
@@ -285,14 +294,14 @@ def run_rows(rows: dict[str, GammaRow], pairs: int, seed: int, ray_address: str 
 
 
 def table(rows: dict[str, dict], paper: dict[str, tuple] | None = None) -> list[str]:
-    lines = ["| controller | steps ↓ | success rate ↑ | avg. dist. ↓ | contact score ↑ | FS ↓ | seconds |",
-             "|---|---|---|---|---|---|---|"]  # fmt: skip
+    lines = ["| controller | steps ↓ | success rate ↑ | avg. dist. ↓ | contact score ↑ | FS ↓ | head low ↓ | seconds |",
+             "|---|---|---|---|---|---|---|---|"]  # fmt: skip
     for name, row in rows.items():
         steps = "–" if np.isnan(row["steps"]) else f"{row['steps']:.1f}"  # no pair reached its goal
         lines.append(f"| {name} | {steps} | {row['success rate']:.2f} | {row['avg. dist.']:.2f} | "
-                     f"{row['contact score']:.3f} | {row['FS']:.3f} | {row['seconds']:.0f} |")  # fmt: skip
+                     f"{row['contact score']:.3f} | {row['FS']:.3f} | {row['head low']:.0%} | {row['seconds']:.0f} |")  # fmt: skip
     for name, (steps, success, distance, score) in (paper or {}).items():
-        lines.append(f"| {name} | {steps} | {success} | {distance} | {score} | | |")
+        lines.append(f"| {name} | {steps} | {success} | {distance} | {score} | | | |")
     return lines
 
 
@@ -333,7 +342,8 @@ def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False,
         "The paper's protocol (Sec. 4.2): a pair succeeds when any clone reaches the goal (0.75 m), and ends there. "
         "Steps: primitives to the first arrival (successful pairs); avg. dist.: pelvis-goal ground distance (m) of all "
         "clones when the pair ends (search rows: of the kept nodes); contact score: Eq. 11 per primitive; FS: WANDR's, "
-        "40 fps, 0.2 m/s. Search rows: 16 roots, 4 children per node, top-K kept, the release's node cost (contact + "
+        "40 fps, 0.2 m/s; head low: share of generated frames with the head below 1.38 m (`rewards.UPRIGHT_HEAD`; the "
+        "clean data's walking 15% test, 27% training). Search rows: 16 roots, 4 children per node, top-K kept, the release's node cost (contact + "
         "0.1 × orientation + 0.1 × distance) or distance alone (`SearchCost.distance_only`). Policies sample their latents. "
         f"Pairs run in groups of {PAIRS_PER_TASK} (`benchmarks.fanout`), "
         + ("in this process" if ray_address is None else f"as Ray tasks ({ray_address})") + "; seconds: a row's groups, summed.",

@@ -47,7 +47,6 @@ from motion_envs.plots import grid_of_axes, save, top_down
 from motion_envs.priors.wandr_features import FPS as WANDR_FPS
 from motion_envs.populate import PRIMITIVE_SECONDS, populate
 from motion_envs.priors.training import WEIGHTS_DIR
-from motion_envs.rewards import UPRIGHT_HEAD, head_drop
 from motion_envs.scenes.layouts import FAMILIES, TEST_SEEDS, make_scene
 from motion_envs.scenes.paths import far_ends
 from motion_envs.wrappers.tree_search import SearchCost, SearchSettings
@@ -59,25 +58,19 @@ COSTS = {"distance": SearchCost.distance_only(), "release": SearchCost()}
 
 
 class WanderRecorder(Recorder):
-    """`Recorder` plus the share of primitives that collided with the scene and of new frames whose head is lower
-    than `UPRIGHT_HEAD`."""
+    """`Recorder` plus the share of primitives that collided with the scene."""
 
     def __init__(self, core: GammaWanderCore, start: GammaWanderState, horizon: int) -> None:
         super().__init__(core, start, horizon)
         self.collided: list[torch.Tensor] = []
-        self.stooped: list[tuple[float, int]] = []
 
     def add(self, step: int, result, rows: torch.Tensor, every: int = 1) -> None:
         super().add(step, result, rows, every)
         self.collided.append(result.collided.float().cpu())
-        new = result.primitive.new_frames()
-        low = head_drop(result.primitive.joints, UPRIGHT_HEAD) > 0
-        self.stooped.append((float((low & new).sum()), int(new.sum())))
 
     def row(self, steps: torch.Tensor, reached: torch.Tensor, distance: torch.Tensor) -> dict:
         collided = torch.cat(self.collided)
-        return {**super().row(steps, reached, distance), "collided": (float(collided.sum()), len(collided)),
-                "stooped": tuple(map(sum, zip(*self.stooped)))}  # fmt: skip
+        return {**super().row(steps, reached, distance), "collided": (float(collided.sum()), len(collided))}
 
 
 def figures(row: dict, seconds: float) -> dict:

@@ -10,6 +10,7 @@ from gymnasium.utils.env_checker import check_env
 
 import motion_envs  # noqa: F401  (registers the ids)
 from motion_envs.body.markers import marker_ids
+from motion_envs.body.skeleton import joint_index
 from motion_envs.envs.gamma_reach import OBSERVATION_SIZE, GammaReachEnv
 from motion_envs.priors.checkpoint import CheckpointMismatchError
 from motion_envs.priors.gamma_generator import GammaGenerator
@@ -59,7 +60,11 @@ def test_observation_is_the_papers_state(env):
     assert np.abs(state[0, :, :2]).max() < 1.2  # markers around the canonical pelvis
 
 
-def test_reward_terms_lie_in_unit_interval_and_sum_to_the_reward(env):
+def test_reward_terms_lie_in_unit_interval_and_sum_to_the_reward(gamma):
+    """GAMMA's five terms lie in [0, 1]; the reward is their weighted sum plus the settlement, the absorbing payment
+    and `stooping` times minus the metres the head is below `upright_head` over the new frames (1.7 m here, so that
+    every frame pays; the start bodies' heads are at about 1.5 m)."""
+    env = GammaReachEnv(generator=gamma, stooping=2.0, upright_head=1.7, precision="float32")
     env.reset(seed=1)
     weights = env.config.reward
     for z in _latents(6, 1):
@@ -67,9 +72,16 @@ def test_reward_terms_lie_in_unit_interval_and_sum_to_the_reward(env):
         terms = info["reward_terms"]
         for name in ("path", "orientation", "contact", "pose_prior", "goal"):
             assert 0.0 <= terms[name] <= 1.0, name
+        primitive = env.last_primitive
+        head = primitive.joints[0, :, joint_index("head"), 2].double()
+        drop = ((1.7 - head) * primitive.new_frames()[0]).sum().item()
+        assert drop > 0.5 and terms["stooping"] == pytest.approx(-drop, rel=1e-4)
         expected = sum(getattr(weights, name) * terms[name] for name in ("path", "orientation", "contact", "pose_prior", "goal"))
-        assert reward == pytest.approx(expected + weights.goal * terms["goal_settlement"] + terms["goal_absorbing"], rel=1e-5)
+        expected += weights.goal * terms["goal_settlement"] + terms["goal_absorbing"] + 2.0 * terms["stooping"]
+        assert reward == pytest.approx(expected, rel=1e-5)
         assert 0.0 < info["contact_score"] <= 1.0
+    with pytest.raises(ValueError, match="stooping"):
+        GammaReachEnv(generator=gamma, stooping=-1.0)
 
 
 def test_clone_and_restore_give_identical_next_steps(env):

@@ -81,7 +81,7 @@ from motion_envs.envs.options import check_known, index, number, point, scene_se
 from motion_envs.precision import PRECISIONS
 from motion_envs.priors.gamma_generator import GammaGenerator, GammaSeed, Primitive
 from motion_envs.render.env_view import RenderInputs
-from motion_envs.rewards import DATA_WALK_SPEED, UPRIGHT_HEAD, RewardConfig, goal_absorbing_reward, head_drop, overspeed
+from motion_envs.rewards import DATA_WALK_SPEED, UPRIGHT_HEAD, RewardConfig, goal_absorbing_reward, overspeed
 from motion_envs.scenes.layouts import FAMILIES, TRAIN_SEEDS, families_of, make_scene, seeds_of
 from motion_envs.scenes.paths import cell_costs, plan_path, split_legs
 from motion_envs.scenes.scene import Scene
@@ -129,11 +129,7 @@ class GammaWanderConfig:
     primitives above 2.1 m/s, a 90th percentile of 2.7 m/s)."""
     walk_speed: float = DATA_WALK_SPEED
     stooping: float = 0.0
-    """Per frame and metre that the head is lower than `upright_head` (ours; 0: off). GAMMA policies walk hunched,
-    the head hanging forward over bent knees (measured in held-out living rooms, shipped policy against the clean
-    data's walking: head median 1.33 m against 1.42-1.43 m, 78% of frames below 1.4 m against 23-35%; the head
-    0.11 m above the neck against 0.16 m and 0.12 m ahead of it against 0.04 m; the trunk is as upright as the
-    data's, neck 0.44 m above the pelvis)."""
+    """Per frame and metre that the head is lower than `upright_head`: `GammaReachConfig.stooping` (0: off)."""
     upright_head: float = UPRIGHT_HEAD
     reward: RewardConfig = dataclasses.field(default_factory=RewardConfig.paper)
     start_kind: str = "any"
@@ -184,7 +180,7 @@ class GammaWanderConfig:
         return GammaReachConfig(reward=self.reward, goal_radius=self.waypoint_radius, max_primitives=2**62,
                                 start_kind=self.start_kind, latent_bound=self.latent_bound, terminate_on_goal=False,
                                 weights_dir=self.weights_dir, device=self.device, ground_feet=self.ground_feet,
-                                precision=self.precision)  # fmt: skip
+                                precision=self.precision, stooping=self.stooping, upright_head=self.upright_head)  # fmt: skip
 
 
 @dataclasses.dataclass(frozen=True)
@@ -399,14 +395,12 @@ class GammaWanderCore:
         remaining = (config.max_primitives - reach.steps).to(moved.reward.dtype)
         pelvis_path = moved.primitive.joints[:, :, PELVIS]  # (N, 10, 3); the steps into new frames are paid
         speeding = overspeed(pelvis_path[:, :-1], pelvis_path[:, 1:], GAMMA_FPS, config.walk_speed)
-        stooping = head_drop(moved.primitive.joints, config.upright_head)  # (N, 10)
         terms = {**moved.terms, "collision": -collided.float(),
                  "clearance": -(config.clearance_margin - clearance).clamp(min=0.0),
                  "speeding": -(speeding * moved.primitive.new_frames()[:, 1:]).sum(dim=1),
-                 "stooping": -(stooping * moved.primitive.new_frames()).sum(dim=1),
                  "goal_absorbing": goal_absorbing_reward(reached, remaining, config.reward.best_step_reward)}  # fmt: skip
         reward = (moved.reward + config.collision_penalty * terms["collision"] + config.clearance_penalty * terms["clearance"]
-                  + config.speeding * terms["speeding"] + config.stooping * terms["stooping"] + terms["goal_absorbing"])  # fmt: skip
+                  + config.speeding * terms["speeding"] + terms["goal_absorbing"])  # fmt: skip
         truncated = (reach.steps >= config.max_primitives) & ~reached
         next_state = dataclasses.replace(state, reach=reach, current=current, collisions=state.collisions + collided.long())
         result = GammaWanderStepResult(reward, terms, next_state.distance_left(pelvis), waypoint_distance, reached, reached,

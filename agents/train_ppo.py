@@ -129,8 +129,9 @@ class PPOTrainConfig:
             raise ValueError("anchor > 0 holds the policy near its cloned start: it needs init='data'")
         if self.kl_mean not in PRIOR_MEANS:
             raise ValueError(f"kl_mean must be one of {PRIOR_MEANS}, got {self.kl_mean!r}")
-        if self.kl_mean == "cloned" and (self.init != "data" or self.engine != "sb3"):
-            raise ValueError("kl_mean='cloned' centres the regulariser on the cloned policy: it needs init='data' and engine sb3")
+        if self.kl_mean == "cloned" and (self.init == "scratch" or self.engine != "sb3"):
+            raise ValueError("kl_mean='cloned' centres the regulariser on the cloned policy: it needs engine sb3 and "
+                             "init='data' or a policy file trained with it (which holds its anchor)")
 
     def checkpoint_path(self) -> Path:
         """What a resumed run continues from: SB3's model.zip, or RLlib's checkpoint folder."""
@@ -230,6 +231,9 @@ def train_ppo(config: PPOTrainConfig, clone_from: GoalWindows | None = None) -> 
                            learning_rate=config.learning_rate, kl_prior_coef=config.alpha, n_steps=config.n_steps,
                            batch_size=config.batch_size, n_epochs=config.n_epochs)  # this run's settings; fmt: skip
         model.num_timesteps = 0  # this run's steps, from the loaded policy
+        if model.prior_mean != config.kl_mean:
+            raise ValueError(f"{config.init} was trained with kl_mean={model.prior_mean!r}, this run asks for "
+                             f"{config.kl_mean!r}: the regulariser's centre (and its anchor) comes with the policy")
     else:
         model = new_model(config, venv)
         if config.init == "data":

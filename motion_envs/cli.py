@@ -537,7 +537,7 @@ def parser() -> argparse.ArgumentParser:
     train.add_argument("--anchor", type=float, default=None, help="ppo: weight of KL to the cloned policy (default 0)")
     train.add_argument("--kl-mean", choices=("zero", "cloned"), default=None,
                        help="ppo: centre of the alpha-weighted KL: zero (the paper's N(0, I), default) or cloned "
-                            "(N(cloned policy's mean, I), ours; needs --init data)")  # fmt: skip
+                            "(N(cloned policy's mean, I), ours; needs --init data or a policy trained with it)")  # fmt: skip
     train.add_argument("--keep", choices=("best", "last"), default=None,
                        help="ppo: ship the checkpoint of the best success window (default) or the last one")
     train.add_argument("--env-option", action="append", default=[], metavar="KEY=VALUE",

@@ -105,6 +105,12 @@ def test_train_ppo_clones_the_data_then_resumes_and_ships(windows, tmp_path):
     start, end = (PPOKL.load(path, device="cpu").policy.state_dict() for path in (config.weights, tuned.weights))
     assert all(torch.allclose(start[name], end[name], atol=0.05) for name in start)  # starts from it, not from scratch
     assert PPOKL.load(tuned.weights, device="cpu").learning_rate == 1e-5
+    mismatched = PPOTrainConfig(num_envs=4, n_steps=4, batch_size=16, n_epochs=1, total_timesteps=16,
+                                init=str(config.weights), kl_mean="cloned", run_dir=tmp_path / "centred")  # fmt: skip
+    with pytest.raises(ValueError, match="trained with kl_mean='zero'"):  # it has no anchor to centre on
+        train_ppo(mismatched)
+    with pytest.raises(ValueError, match="kl_mean='cloned'"):
+        PPOTrainConfig(init="scratch", kl_mean="cloned")
     with pytest.raises(ValueError, match="policy file"):
         PPOTrainConfig(init="runs/no_such_policy.zip")
     with pytest.raises(ValueError, match="keep"):

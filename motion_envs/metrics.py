@@ -116,13 +116,20 @@ def loaded_foot_skating(soles: torch.Tensor, fps: float, height: float = LOADED_
     Returns:
         (..., T - 1) bool, True where the loaded foot skates. Its mean is the contact-aware FS.
     """
+    return loaded_slide(soles, fps, height, speed) > 0
+
+
+def loaded_slide(soles: torch.Tensor, fps: float, height: float = LOADED_HEIGHT, speed: float = LOADED_SPEED) -> torch.Tensor:
+    """(..., T - 1) m/s by which the loaded sole point slides faster than `speed` (0 where it does not skate):
+    `loaded_foot_skating`'s measure, graded. soles: (..., T, 4, 3) as there."""
     z = soles[..., 2]
     floor = local_floor(z.amin(-1), fps)
     lowest = z[..., :-1, :].argmin(-1, keepdim=True)  # (..., T-1, 1): the loaded foot's lower point
     now = soles[..., :-1, :, :].gather(-2, lowest[..., None].expand(*lowest.shape, 3)).squeeze(-2)
     then = soles[..., 1:, :, :].gather(-2, lowest[..., None].expand(*lowest.shape, 3)).squeeze(-2)
     near = (now[..., 2] - floor[..., :-1] < height) & (then[..., 2] - floor[..., 1:] < height)
-    return near & ((then[..., :2] - now[..., :2]).norm(dim=-1) * fps > speed)
+    excess = (then[..., :2] - now[..., :2]).norm(dim=-1) * fps - speed
+    return torch.where(near, excess.clamp_min(0.0), torch.zeros_like(excess))
 
 
 def stance_ankle_speed(ankles: torch.Tensor, fps: float) -> torch.Tensor:

@@ -16,7 +16,7 @@ from motion_envs.data.mirror import mirror
 from motion_envs.data.motion import BodyMotion
 from motion_envs.data.retarget import RetargetConfig
 from motion_envs.data.skeleton_maps import ACCAD_BVH, CMU_MAX_BVH, match_skeleton
-from motion_envs.metrics import loaded_foot_skating
+from motion_envs.metrics import loaded_foot_skating, loaded_slide
 
 FPS = 30
 
@@ -121,6 +121,12 @@ def test_loaded_foot_skating_counts_a_sliding_foot_and_not_a_pivoting_one():
     slide[:, :2, 1] += torch.linspace(0.0, 0.1, frames)[:, None]  # 0.33 m/s at 30 fps
     assert not loaded_foot_skating(pivot, FPS).any()
     assert loaded_foot_skating(slide, FPS).all()
+    # graded (the GammaReach `skating` term): 0.1 m over 9 frames at 30 fps is 0.333 m/s, 0.133 over the 0.2 limit
+    assert torch.allclose(loaded_slide(slide, FPS), torch.full((frames - 1,), 0.1 / 9 * FPS - 0.2), atol=1e-5)
+    lifted = slide.clone()
+    lifted[:, :2, 2] = torch.linspace(0.0, 0.3, frames)[:, None]  # the sliding foot rises: it bears no weight
+    lifted[:, 2:, 2] = 0.0
+    assert loaded_slide(pivot, FPS).eq(0).all() and loaded_slide(lifted, FPS).eq(0).all()
 
 
 @pytest.mark.mocap

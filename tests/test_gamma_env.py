@@ -9,9 +9,10 @@ import torch
 from gymnasium.utils.env_checker import check_env
 
 import motion_envs  # noqa: F401  (registers the ids)
-from motion_envs.body.markers import marker_ids
+from motion_envs.body.markers import MARKER_NAMES, marker_ids
 from motion_envs.body.skeleton import joint_index
 from motion_envs.envs.gamma_reach import OBSERVATION_SIZE, GammaReachEnv
+from motion_envs.metrics import loaded_slide
 from motion_envs.priors.checkpoint import CheckpointMismatchError
 from motion_envs.priors.gamma_generator import GammaGenerator
 from motion_envs.priors.train_gamma import load_predictor
@@ -61,10 +62,12 @@ def test_observation_is_the_papers_state(env):
 
 
 def test_reward_terms_lie_in_unit_interval_and_sum_to_the_reward(gamma):
-    """GAMMA's five terms lie in [0, 1]; the reward is their weighted sum plus the settlement, the absorbing payment
-    and `stooping` times minus the metres the head is below `upright_head` over the new frames (1.7 m here, so that
-    every frame pays; the start bodies' heads are at about 1.5 m)."""
-    env = GammaReachEnv(generator=gamma, stooping=2.0, upright_head=1.7, precision="float32")
+    """GAMMA's five terms lie in [0, 1]; the reward is their weighted sum plus the settlement, the absorbing payment,
+    `stooping` times minus the metres the head is below `upright_head` over the new frames (1.7 m here, so that
+    every frame pays; the start bodies' heads are at about 1.5 m) and `skating` times minus the m/s the loaded heel
+    or toe marker slides beyond 0.2 m/s (random latents skate)."""
+    env = GammaReachEnv(generator=gamma, stooping=2.0, upright_head=1.7, skating=0.5, precision="float32")
+    slid = 0.0
     env.reset(seed=1)
     weights = env.config.reward
     for z in _latents(6, 1):
@@ -76,10 +79,15 @@ def test_reward_terms_lie_in_unit_interval_and_sum_to_the_reward(gamma):
         head = primitive.joints[0, :, joint_index("head"), 2].double()
         drop = ((1.7 - head) * primitive.new_frames()[0]).sum().item()
         assert drop > 0.5 and terms["stooping"] == pytest.approx(-drop, rel=1e-4)
+        soles = primitive.reprojected_markers[0][:, [MARKER_NAMES.index(name) for name in ("LHEE", "LTOE", "RHEE", "RTOE")]]
+        slide = loaded_slide(soles, 40.0) * primitive.new_frames()[0, 1:]
+        assert terms["skating"] == pytest.approx(-slide.sum().item(), rel=1e-4, abs=1e-6)
+        slid += slide.sum().item()
         expected = sum(getattr(weights, name) * terms[name] for name in ("path", "orientation", "contact", "pose_prior", "goal"))
-        expected += weights.goal * terms["goal_settlement"] + terms["goal_absorbing"] + 2.0 * terms["stooping"]
+        expected += weights.goal * terms["goal_settlement"] + terms["goal_absorbing"] + 2.0 * terms["stooping"] + 0.5 * terms["skating"]
         assert reward == pytest.approx(expected, rel=1e-5)
         assert 0.0 < info["contact_score"] <= 1.0
+    assert slid > 0.1, slid
     with pytest.raises(ValueError, match="stooping"):
         GammaReachEnv(generator=gamma, stooping=-1.0)
 

@@ -13,8 +13,10 @@ from gymnasium.utils.env_checker import check_env
 
 import motion_envs  # noqa: F401  (registers the ids)
 from baselines.latent_controllers import RandomLatent
+from motion_envs.body.markers import MARKER_NAMES
 from motion_envs.body.skeleton import joint_index
 from motion_envs.envs.gamma_wander import GammaWanderConfig, GammaWanderCore, GammaWanderEnv
+from motion_envs.metrics import loaded_slide
 from motion_envs.priors.gamma_generator import GammaGenerator
 from motion_envs.scenes import FAMILIES, TEST_SEEDS, Scene, ScenePart, make_scene
 from motion_envs.scenes.labels import label_id
@@ -156,12 +158,13 @@ def test_the_search_prunes_branches_that_walk_into_a_table(gamma):
     assert collisions[False] >= 16 and collisions[True] <= collisions[False] / 4, collisions
 
 
-def test_collision_clearance_speeding_and_stooping_penalties_are_paid_in_proportion(gamma):
+def test_collision_clearance_speeding_stooping_and_skating_penalties_are_paid_in_proportion(gamma):
     """A body walking straight through a table: the same latents with and without the penalties move it alike (the
     reward does not feed back into the motion), and the rewards differ by exactly collision_penalty per colliding
     primitive, clearance_penalty per metre inside the margin, speeding per frame and m/s that the pelvis is
-    faster than walk_speed (0.5 m/s here, so that an ordinary walk pays it) and stooping per frame and metre that
-    the head is lower than upright_head (1.6 m here, for the same reason)."""
+    faster than walk_speed (0.5 m/s here, so that an ordinary walk pays it), stooping per frame and metre that
+    the head is lower than upright_head (1.6 m here, for the same reason) and skating per frame and m/s that the
+    loaded heel or toe marker slides beyond 0.2 m/s."""
     from agents.controllers import PolicyLatent
     from motion_envs.priors.training import WEIGHTS_DIR
 
@@ -170,7 +173,7 @@ def test_collision_clearance_speeding_and_stooping_penalties_are_paid_in_proport
     for paid in (False, True):
         config = GammaWanderConfig(scene="flat", collision_penalty=4.0 * paid, clearance_penalty=10.0 * paid,
                                    speeding=2.0 * paid, walk_speed=0.5, stooping=3.0 * paid, upright_head=1.6,
-                                   precision="float32")  # fmt: skip
+                                   skating=5.0 * paid, precision="float32")  # fmt: skip
         core = GammaWanderCore(config, gamma)
         slot = core.add_scene(_table_scene())
         state = core.initial_state(torch.tensor([0]), torch.tensor([0.0]), np.array([[3.0, 2.0]]),
@@ -184,7 +187,7 @@ def test_collision_clearance_speeding_and_stooping_penalties_are_paid_in_proport
     collided = torch.cat([result.collided for result in results[True]])
     assert torch.equal(clearance, torch.cat([result.clearance for result in results[False]]))
     assert collided.sum() >= 2 and torch.isfinite(clearance).all()
-    over, low = [], []
+    over, low, slid = [], [], []
     for result in results[True]:
         pelvis = result.primitive.joints[:, :, 0, :2].double()
         speed = (pelvis[:, 1:] - pelvis[:, :-1]).norm(dim=-1) * 40.0
@@ -192,10 +195,13 @@ def test_collision_clearance_speeding_and_stooping_penalties_are_paid_in_proport
         over.append(((speed - 0.5).clamp(min=0.0) * new).sum(dim=1).float())
         head = result.primitive.joints[:, :, joint_index("head"), 2].double()
         low.append(((1.6 - head).clamp(min=0.0) * result.primitive.new_frames()).sum(dim=1).float())
-    over, low = torch.cat(over), torch.cat(low)
+        soles = result.primitive.reprojected_markers[:, :, [MARKER_NAMES.index(name) for name in ("LHEE", "LTOE", "RHEE", "RTOE")]]
+        slid.append((loaded_slide(soles, 40.0) * result.primitive.new_frames()[:, 1:]).sum(dim=1))
+    over, low, slid = torch.cat(over), torch.cat(low), torch.cat(slid)
     assert (over > 0).sum() >= 6, over  # the body walks faster than 0.5 m/s in most primitives
     assert (low > 0).sum() >= 6, low  # and its head is lower than 1.6 m
-    expected = 4.0 * collided.float() + 10.0 * (0.1 - clearance).clamp(min=0.0) + 2.0 * over + 3.0 * low
+    assert (slid > 0).sum() >= 3, slid  # and a planted foot slides now and then
+    expected = 4.0 * collided.float() + 10.0 * (0.1 - clearance).clamp(min=0.0) + 2.0 * over + 3.0 * low + 5.0 * slid
     assert torch.allclose(torch.cat(rewards[False]) - torch.cat(rewards[True]), expected, atol=1e-3)
     with pytest.raises(ValueError, match="clearance_penalty"):
         GammaWanderConfig(clearance_penalty=-1.0)

@@ -30,8 +30,9 @@ env unchanged: it sees the current waypoint as its goal, the paper's way.
 GammaReach's terms (`motion_envs.rewards`, weights from `reward`) towards the current waypoint, minus
 `collision_penalty` for a primitive in which a body sphere enters the scene more than `collision_tolerance`,
 and `clearance_penalty` per metre that its deepest sphere comes inside `clearance_margin` of the scene, and
-`speeding` per frame and m/s that the pelvis moves faster than `walk_speed` over the ground, and `stooping` per
-frame and metre that the head is lower than `upright_head` (all 0 by default:
+`speeding` per frame and m/s that the pelvis moves faster than `walk_speed` over the ground, `stooping` per
+frame and metre that the head is lower than `upright_head`, and `skating` per frame and m/s that the loaded heel
+or toe slides on the floor (GammaReach's; all 0 by default:
 collisions are reported in `info`, not paid; the shipped policy's recipe sets them). When a waypoint is
 passed the goal term's closest distance restarts from the next one. Arriving at the last waypoint also earns the remaining
 primitives at the best per-step reward (GammaReach's `goal_absorbing`), so that ending early never pays less
@@ -131,6 +132,8 @@ class GammaWanderConfig:
     stooping: float = 0.0
     """Per frame and metre that the head is lower than `upright_head`: `GammaReachConfig.stooping` (0: off)."""
     upright_head: float = UPRIGHT_HEAD
+    skating: float = 0.0
+    """Per frame and m/s that the loaded heel or toe slides on the floor: `GammaReachConfig.skating` (0: off)."""
     reward: RewardConfig = dataclasses.field(default_factory=RewardConfig.paper)
     start_kind: str = "any"
     latent_bound: float = 4.0
@@ -152,7 +155,7 @@ class GammaWanderConfig:
             raise ValueError("scene_seeds must name at least one seed")
         penalties = {"collision_penalty": self.collision_penalty, "clearance_penalty": self.clearance_penalty,
                      "clearance_margin": self.clearance_margin, "speeding": self.speeding, "stooping": self.stooping,
-                     "upright_head": self.upright_head}  # fmt: skip
+                     "upright_head": self.upright_head, "skating": self.skating}  # fmt: skip
         negative = {name: value for name, value in penalties.items() if value < 0}
         if negative:
             raise ValueError(f"{', '.join(negative)} must be >= 0, got {negative}")
@@ -180,7 +183,8 @@ class GammaWanderConfig:
         return GammaReachConfig(reward=self.reward, goal_radius=self.waypoint_radius, max_primitives=2**62,
                                 start_kind=self.start_kind, latent_bound=self.latent_bound, terminate_on_goal=False,
                                 weights_dir=self.weights_dir, device=self.device, ground_feet=self.ground_feet,
-                                precision=self.precision, stooping=self.stooping, upright_head=self.upright_head)  # fmt: skip
+                                precision=self.precision, stooping=self.stooping, upright_head=self.upright_head,
+                                skating=self.skating)  # fmt: skip
 
 
 @dataclasses.dataclass(frozen=True)

@@ -98,8 +98,10 @@ def announce_replacement(weights: Path) -> None:
     manifest_path = WEIGHTS_DIR / "manifest.json"
     record = json.loads(manifest_path.read_text()).get(weights.name, {}) if manifest_path.exists() else {}
     figures = {key: value for key, value in record.items() if key.startswith("validation") and not isinstance(value, (list, dict))}
-    print(f"replacing the shipped {weights} (made by: {record.get('command') or 'unknown'}; {figures or 'no figures'})",
-          file=sys.stderr)  # fmt: skip
+    if record.get("curve"):  # a policy: its last success-rate window
+        figures["last success rate"] = round(record["curve"][-1]["success_rate"], 3)
+    command = record.get("command") or record.get("config", {}).get("command") or "unknown"  # priors / policies
+    print(f"replacing the shipped {weights} (made by: {command}; {figures or 'no figures'})", file=sys.stderr)
 
 
 def seed_everything(seed: int) -> None:

@@ -9,8 +9,9 @@ z, and the same figures are measured on the validation clips themselves.
 FS follows WANDR's definition at the data's 40 fps with WANDR's speed
 threshold (0.66 cm per frame at 30 fps = 0.2 m/s, i.e. 0.5 cm per frame
 here); the contact-aware FS is `metrics.loaded_foot_skating`. The random
-latents run on the raw prior and again with the envs' floor rule
-(`ground_feet`), so the rule hides nothing. Writes
+latents run on the raw prior, again with the envs' floor rule
+(`ground_feet`) and again with both the floor and the foot rule
+(`lock_feet`), as the envs run by default, so the rules hide nothing. Writes
 `benchmarks/results/gamma_realism.md` and
 `gamma_realism_paths.png` (top-down pelvis paths).
 """
@@ -91,9 +92,9 @@ def motion_figures(markers: torch.Tensor, feet: torch.Tensor, soles: torch.Tenso
 
 @torch.no_grad()
 def random_motion(gamma: GammaGenerator, rollouts: int, primitives: int, seed: int,
-                  ground_feet: bool = False) -> dict[str, torch.Tensor]:  # fmt: skip
-    """Roll every start pose out `rollouts` times with z ~ N(0, I) (the raw prior, or with the envs' floor rule);
-    new frames only, concatenated."""
+                  ground_feet: bool = False, lock_feet: bool = False) -> dict[str, torch.Tensor]:  # fmt: skip
+    """Roll every start pose out `rollouts` times with z ~ N(0, I) (the raw prior, or with the envs' floor and foot
+    rules); new frames only, concatenated."""
     starts = load_start_poses(GAMMA_FPS)
 
     def last(name: str) -> torch.Tensor:
@@ -104,7 +105,7 @@ def random_motion(gamma: GammaGenerator, rollouts: int, primitives: int, seed: i
     pieces: dict[str, list[torch.Tensor]] = {"markers": [], "transl": [], "global_orient": [], "body_pose": []}
     for step in range(primitives):
         z = torch.randn(state.num_bodies, gamma.latent_size, generator=generator)
-        primitive, state = gamma.step(state, z, ground_feet=ground_feet)
+        primitive, state = gamma.step(state, z, ground_feet=ground_feet, lock_feet=lock_feet)
         first_new = 0 if step == 0 else 2  # the first primitive's seed frame is the start pose itself
         for name in pieces:
             pieces[name].append(getattr(primitive, name)[:, first_new:])
@@ -128,10 +129,12 @@ def main(mocap_dir: Path | None = None, cache_dir: Path | None = None, subsets: 
     generated = random_motion(gamma, rollouts, primitives, seed)
     generation_seconds = time.perf_counter() - generation_began
     grounded = random_motion(gamma, rollouts, primitives, seed, ground_feet=True)
+    locked = random_motion(gamma, rollouts, primitives, seed, ground_feet=True, lock_feet=True)
     with torch.no_grad():
         feet, soles, pelvis = feet_of(generated["transl"], generated["global_orient"], generated["body_pose"])
         ours = motion_figures(generated["markers"], feet, soles, pelvis)
         ruled = motion_figures(grounded["markers"], *feet_of(grounded["transl"], grounded["global_orient"], grounded["body_pose"]))
+        both = motion_figures(locked["markers"], *feet_of(locked["transl"], locked["global_orient"], locked["body_pose"]))
 
     report = build(mocap_dir=mocap_dir, cache_dir=cache_dir, subsets=subsets, fps_list=(GAMMA_FPS,))
     dataset = MotionDataset.load(report.caches[GAMMA_FPS])
@@ -152,12 +155,12 @@ def main(mocap_dir: Path | None = None, cache_dir: Path | None = None, subsets: 
         f"{primitives} primitives each ({frames} new frames at 40 fps, {frames / GAMMA_FPS:.1f} s), seed {seed}. "
         f"Data: the {len(per_clip)} validation clips ({sum(weights)} frames), figures averaged over clips by length.",
         "",
-        "| | generated (random z), raw prior | generated, with the envs' floor rule | validation data | GAMMA paper: generated / data |",
-        "|---|---|---|---|---|",
+        "| | generated (random z), raw prior | generated, with the envs' floor rule | with the floor and foot rules (the envs' default) | validation data | GAMMA paper: generated / data |",
+        "|---|---|---|---|---|---|",
     ]
     paper = {"FS": "0.064 / 0.067 (WANDR Tab. 1)", "contact score (Eq. 11)": "plotted in Fig. 3 (values not in the text)"}
     for name in ours:
-        lines.append(f"| {name} | {ours[name]:.3f} | {ruled[name]:.3f} | {data[name]:.3f} | {paper.get(name, '')} |")
+        lines.append(f"| {name} | {ours[name]:.3f} | {ruled[name]:.3f} | {both[name]:.3f} | {data[name]:.3f} | {paper.get(name, '')} |")
     lines += [
         "",
         f"Generation: {bodies * primitives / generation_seconds:,.0f} body-primitives/s "

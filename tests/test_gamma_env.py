@@ -65,8 +65,9 @@ def test_reward_terms_lie_in_unit_interval_and_sum_to_the_reward(gamma):
     """GAMMA's five terms lie in [0, 1]; the reward is their weighted sum plus the settlement, the absorbing payment,
     `stooping` times minus the metres the head is below `upright_head` over the new frames (1.7 m here, so that
     every frame pays; the start bodies' heads are at about 1.5 m) and `skating` times minus the m/s the loaded heel
-    or toe marker slides beyond 0.2 m/s (random latents skate)."""
-    env = GammaReachEnv(generator=gamma, stooping=2.0, upright_head=1.7, skating=0.5, precision="float32")
+    or toe marker slides beyond 0.2 m/s (random latents skate on the regressor's bodies; the foot rule would hold
+    them, `tests/test_foot_lock.py`)."""
+    env = GammaReachEnv(generator=gamma, stooping=2.0, upright_head=1.7, skating=0.5, precision="float32", lock_feet=False)
     slid = 0.0
     env.reset(seed=1)
     weights = env.config.reward
@@ -115,7 +116,10 @@ def test_state_repeats_into_clones_that_step_together(gamma):
     assert len({round(float(d), 4) for d in result.distance}) > 1  # different latents, different motion
 
 
-def test_markers_are_the_blend_of_prediction_and_the_regressed_body(env, body):
+def test_markers_are_the_blend_of_prediction_and_the_regressed_body(gamma, body):
+    """Without the foot rule the bodies are the regressor's, and the markers their blend with the prediction (with
+    it the blend is the same, `tests/test_foot_lock.py`)."""
+    env = GammaReachEnv(generator=gamma, lock_feet=False)
     env.reset(seed=5)
     for z in _latents(3, 5):
         env.step(z)

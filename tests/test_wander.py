@@ -154,8 +154,9 @@ def test_the_search_prunes_branches_that_walk_into_a_table(gamma):
                 cost = dataclasses.replace(cost, collision=0.0, clearance=0.0)
             found = beam_search(core, start, half_policy, SearchSettings(roots=16, children=4, keep=4, max_depth=8, cost=cost))
             collisions[scene_terms] += int(found.collisions[0])
-    # measured (8 searches of 8 primitives, AMX Xeon): with the scene terms 0 (fp32 and bf16), without 30 (fp32) and 31 (bf16)
-    assert collisions[False] >= 16 and collisions[True] <= collisions[False] / 4, collisions
+    # measured (8 searches of 8 primitives, AMX Xeon, bf16): with the scene terms 0; without 13 with the foot rule,
+    # 17 without it (the upright policy of f7e59dd; 30-31 with the policy before it)
+    assert collisions[False] >= 8 and collisions[True] <= collisions[False] / 4, collisions
 
 
 def test_collision_clearance_speeding_stooping_and_skating_penalties_are_paid_in_proportion(gamma):

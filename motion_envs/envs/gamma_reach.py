@@ -51,6 +51,14 @@ soles' convex hulls) touches the ground, as WandrReach's rule: the prior's heigh
 body or fly it metres up) and a walking body always has a foot down. The realism benchmarks also measure the
 prior without it (`ground_feet=False`).
 
+## Feet
+
+With `lock_feet` (default) each body's legs are fitted to the predicted feet and a loaded foot is held where it
+touched down (`GammaGenerator.step`, `motion_envs.body.foot_lock`): the body regressor recovers every frame on
+its own, and its feet slide where the prediction holds them. Only the legs change; the next seed and so the
+motion are the prior's (the shipped policies behave as without the rule). `lock_feet=False` shows the
+regressor's bodies.
+
 ## Episode End
 
 Success: the pelvis (last frame of a primitive) within `goal_radius` (0.75 m)
@@ -135,6 +143,9 @@ class GammaReachConfig:
     ground_feet: bool = True
     """The floor rule: each new frame is moved vertically so the body's lowest sole point is on the ground
     (`GammaGenerator.step`); False shows the raw prior, whose height drifts."""
+    lock_feet: bool = True
+    """The foot rule: legs fitted to the predicted feet, loaded feet held (`GammaGenerator.step`); False shows the
+    regressor's bodies, whose feet slide."""
     precision: str = "auto"
     """The prior's networks: "float32", "bfloat16", or "auto": bf16 where the device multiplies it natively
     (`motion_envs.precision`; AMX / AVX512-BF16 CPUs, bf16 GPUs), else fp32. The core sets its generator's."""
@@ -283,7 +294,8 @@ class GammaReachCore:
         """Generate one primitive per body from latents z (N, 128) and score it."""
         config, weights = self.config, self.config.reward
         z = z.to(self.device, torch.float32).clamp(-config.latent_bound, config.latent_bound)
-        primitive, next_seed = self.generator.step(state.seed, z, state.goal, ground_feet=config.ground_feet)
+        primitive, next_seed = self.generator.step(state.seed, z, state.goal, ground_feet=config.ground_feet,
+                                                    lock_feet=config.lock_feet)
         joints, goal = primitive.joints, state.goal
         pelvis_start, pelvis_end = joints[:, 0, PELVIS], joints[:, -1, PELVIS]
         distance = (pelvis_end[:, :2] - goal[:, :2]).norm(dim=-1)

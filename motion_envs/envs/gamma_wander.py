@@ -140,6 +140,7 @@ class GammaWanderConfig:
     weights_dir: str | None = None
     device: str = "cpu"
     ground_feet: bool = True
+    lock_feet: bool = True
     precision: str = "auto"
 
     def __post_init__(self) -> None:
@@ -183,8 +184,8 @@ class GammaWanderConfig:
         return GammaReachConfig(reward=self.reward, goal_radius=self.waypoint_radius, max_primitives=2**62,
                                 start_kind=self.start_kind, latent_bound=self.latent_bound, terminate_on_goal=False,
                                 weights_dir=self.weights_dir, device=self.device, ground_feet=self.ground_feet,
-                                precision=self.precision, stooping=self.stooping, upright_head=self.upright_head,
-                                skating=self.skating)  # fmt: skip
+                                lock_feet=self.lock_feet, precision=self.precision, stooping=self.stooping,
+                                upright_head=self.upright_head, skating=self.skating)  # fmt: skip
 
 
 @dataclasses.dataclass(frozen=True)

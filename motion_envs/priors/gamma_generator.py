@@ -13,7 +13,16 @@ and N latent codes and, batched over bodies:
 4. blends: the primitive's markers are the average of predicted and
    re-projected markers (the paper's "ours-ro", release factor 0.5), so a
    body never drifts more than half the prediction error from its markers;
-5. with `ground_feet` (the envs' floor rule, as WANDR's stepper), lifts or
+5. with `lock_feet` (the envs' foot rule), fits each body's legs to the
+   predicted feet and holds a loaded foot where it touched down
+   (`motion_envs.body.foot_lock`, `motion_envs.body.leg_fit`): the regressor
+   recovers every frame on its own, so its feet jitter by ~1 cm from frame to
+   frame and slide where the prediction holds them still. Only the bodies
+   change (legs below the hips; pelvis, spine, arms and head are the
+   regressor's): the blend and so the next seed use the regressor's own
+   re-projection, so the prior's motion, and every policy trained on it,
+   goes where it went without the rule. Off in `step` alone, the raw prior;
+6. with `ground_feet` (the envs' floor rule, as WANDR's stepper), lifts or
    lowers each new frame so that its body's lowest sole point (the soles'
    convex hulls, `sole_hull_vertex_ids`: 50 vertices, heights only)
    is on the floor (grounding the lowest foot marker instead left 0.3-0.7% of
@@ -23,7 +32,7 @@ and N latent codes and, batched over bodies:
    walking; a jump would be pulled down); the seed frames are the previous
    primitive's, already grounded. Off by default: `step` alone is the raw
    prior, which the realism benchmarks measure too;
-6. returns the primitive (world) and the next seed: its last two frames.
+7. returns the primitive (world) and the next seed: its last two frames.
 
 Seed frames are part of every primitive (frames 0..S-1), so a primitive always
 has 10 frames; the 10 - S after the seed are new.
@@ -47,10 +56,12 @@ import torch
 
 from motion_envs.batched import BatchedState
 from motion_envs.body import BodyModel
+from motion_envs.body.foot_lock import locked_feet
+from motion_envs.body.leg_fit import CONTACT_POINTS, fit_legs, leg_fit_marker_slots
 from motion_envs.body.markers import marker_ids
 from motion_envs.body.soles import sole_hull_vertex_ids
 from motion_envs.body.rotations import matrix_to_sixd, rotation_matrix
-from motion_envs.data.primitives import PRIMITIVE_FRAMES
+from motion_envs.data.primitives import GAMMA_FPS, PRIMITIVE_FRAMES
 from motion_envs.body.canonical_frame import CanonicalFrame, canonical_frame, goal_observation, to_canonical, to_world
 from motion_envs.priors.gamma import MarkerCVAE, PoseVAE, goal_conditioned_seed
 from motion_envs.priors.train_gamma import load_predictor
@@ -70,12 +81,14 @@ class GammaSeed(BatchedState):
 
     seed_frames: (N,) long, 1 or 2: how many of the two frames seed the next
         primitive. With 1 only frame index 1 counts (index 0 holds a copy).
-    markers: (N, 2, 67, 3). joints: (N, 2, 22, 3). transl: (N, 2, 3) pelvis.
+    markers: (N, 2, 67, 3) what the predictor is seeded with (the blend, step 4).
+    body_markers: (N, 2, 67, 3) the same markers skinned on the bodies. joints: (N, 2, 22, 3). transl: (N, 2, 3) pelvis.
     global_orient: (N, 2, 6) and body_pose: (N, 2, 21, 6), 6-D rotations.
     """
 
     seed_frames: torch.Tensor
     markers: torch.Tensor
+    body_markers: torch.Tensor
     joints: torch.Tensor
     transl: torch.Tensor
     global_orient: torch.Tensor
@@ -86,24 +99,21 @@ class GammaSeed(BatchedState):
 class Primitive:
     """One generated primitive of N bodies, world coordinates, 10 frames.
 
-    markers: (N, 10, 67, 3) blended markers. reprojected_markers: same, skinned from the regressed bodies.
-    `predicted_markers`: same, before blending (solved from the other two when asked: one (N, 10, 67, 3) copy
-    less per step). Seed frames (`~new_frames()`) hold the seed's markers in all three. joints: (N, 10, 22, 3).
+    markers: (N, 10, 67, 3) blended markers (the next seed's). predicted_markers: same, the predictor's.
+    reprojected_markers: same, skinned on the bodies (with `lock_feet`, the bodies after foot locking; otherwise
+    GAMMA's re-projection, whose blend with the prediction `markers` is). Seed frames (`~new_frames()`) hold the
+    seed's blended markers in the first two and its bodies' in the third. joints: (N, 10, 22, 3).
     transl: (N, 10, 3). global_orient: (N, 10, 6). body_pose: (N, 10, 21, 6). seed_frames: (N,).
     """
 
     markers: torch.Tensor
+    predicted_markers: torch.Tensor
     reprojected_markers: torch.Tensor
     joints: torch.Tensor
     transl: torch.Tensor
     global_orient: torch.Tensor
     body_pose: torch.Tensor
     seed_frames: torch.Tensor
-
-    @property
-    def predicted_markers(self) -> torch.Tensor:
-        """(N, 10, 67, 3) the predictor's markers: the blend solved for them (float32 rounding, ~1e-6 m)."""
-        return (self.markers - BLEND_FACTOR * self.reprojected_markers) / (1.0 - BLEND_FACTOR)
 
     def new_frames(self) -> torch.Tensor:
         """(N, 10) bool: frames after the seed."""
@@ -129,6 +139,7 @@ class GammaGenerator(torch.nn.Module):
         self.requires_grad_(False)
         self.eval()
         self.precision = "float32"
+        self.register_buffer("leg_fit_slots", leg_fit_marker_slots(), persistent=False)
         self._copies: dict[tuple[str, int, torch.device], torch.nn.Module] = {}
 
     def set_precision(self, precision: str) -> GammaGenerator:
@@ -191,13 +202,14 @@ class GammaGenerator(torch.nn.Module):
             return torch.stack([value, value], dim=1)
 
         count = torch.ones(len(transl), dtype=torch.long, device=transl.device)
-        return GammaSeed(count, twice(markers), twice(joints), twice(transl), twice(orient), twice(pose))
+        return GammaSeed(count, twice(markers), twice(markers), twice(joints), twice(transl), twice(orient), twice(pose))
 
     @torch.no_grad()
     def step(self, seed: GammaSeed, z: torch.Tensor, goal: torch.Tensor | None = None,
-             ground_feet: bool = False) -> tuple[Primitive, GammaSeed]:  # fmt: skip
+             ground_feet: bool = False, lock_feet: bool = False) -> tuple[Primitive, GammaSeed]:  # fmt: skip
         """Generate one primitive for every body. z: (N, latent). goal: (N, 3) world, needed (and only used)
-        by a goal-conditioned predictor (the g-CVAE baseline). `ground_feet`: the floor rule (module doc, 5)."""
+        by a goal-conditioned predictor (the g-CVAE baseline). `ground_feet`: the floor rule (module doc, 6).
+        `lock_feet`: the foot rule, loaded feet held still (module doc, 5)."""
         count = len(z)
         bodies = torch.arange(count, device=z.device)
         first = seed.joints[bodies, 2 - seed.seed_frames]  # (N, 22, 3) first seed frame
@@ -209,24 +221,26 @@ class GammaGenerator(torch.nn.Module):
             if len(rows):  # two batched groups, not a loop over bodies
                 group_frame = CanonicalFrame(frame.origin[rows], frame.rotation[rows])
                 parts.append((rows, self._group(seed, rows, seed_slot[rows, 2 - frames :], group_frame, model, z[rows],
-                                                None if goal is None else goal[rows], first[rows])))  # fmt: skip
+                                                None if goal is None else goal[rows], first[rows], lock_feet)))  # fmt: skip
         fields = _merge(parts, count)
         lowest_sole = fields.pop("lowest_sole")
         if ground_feet:
             _ground(fields, lowest_sole, seed.seed_frames)
         primitive = Primitive(**fields, seed_frames=seed.seed_frames)
         next_seed = GammaSeed(
-            torch.full_like(seed.seed_frames, 2), primitive.markers[:, -2:], primitive.joints[:, -2:],
-            primitive.transl[:, -2:], primitive.global_orient[:, -2:], primitive.body_pose[:, -2:],
+            torch.full_like(seed.seed_frames, 2), primitive.markers[:, -2:], primitive.reprojected_markers[:, -2:],
+            primitive.joints[:, -2:], primitive.transl[:, -2:], primitive.global_orient[:, -2:],
+            primitive.body_pose[:, -2:],
         )  # fmt: skip
         return primitive, next_seed
 
     def _group(self, seed: GammaSeed, rows: torch.Tensor, slots: torch.Tensor, frame: CanonicalFrame, model: str,
-               z: torch.Tensor, goal: torch.Tensor | None, first: torch.Tensor) -> dict[str, torch.Tensor]:  # fmt: skip
+               z: torch.Tensor, goal: torch.Tensor | None, first: torch.Tensor, lock_feet: bool) -> dict[str, torch.Tensor]:  # fmt: skip
         """The primitive of the M bodies `rows` whose seeds have S = `slots.shape[1]` frames (their slots in the
         seed: (M, S)): the 10 - S new frames predicted, regressed to bodies and re-projected (only those: the S seed
-        frames are the seed's own bodies and markers), then the seed frames put in front. Returns `Primitive`'s
-        fields, (M, 10, ...) each, and "lowest_sole" (M, 10): each new frame's lowest sole point (0 at seed frames)."""
+        frames are the seed's own bodies and markers), with `lock_feet` the legs fitted, then the seed frames put in
+        front. Returns `Primitive`'s fields, (M, 10, ...) each, and "lowest_sole" (M, 10): each new frame's lowest
+        sole point (0 at seed frames)."""
         frames = slots.shape[1]
         seed_world = {name: getattr(seed, name)[rows[:, None], slots] for name in SEED_FIELDS}  # (M, S, ...)
         group_seed = to_canonical(seed_world["markers"].flatten(1, 2), frame).unflatten(1, (frames, -1))  # (M, S, 67, 3)
@@ -244,21 +258,27 @@ class GammaGenerator(torch.nn.Module):
         orient = matrix_to_sixd(frame.rotation[:, None] @ rotation_matrix(regressed["global_orient"]))
         pose = regressed["body_pose"]
         posed = self.body(transl, orient, pose)
-        joints, reprojected = posed.joints, self.body.skin_with_rows(posed, self.marker_rows)
+        reprojected = self.body.skin_with_rows(posed, self.marker_rows)
         predicted = to_world(future.flatten(1, 2), frame).unflatten(1, (-1, future.shape[2]))
         markers = seed_world["markers"].new_empty((len(rows), PRIMITIVE_FRAMES, *predicted.shape[2:]))
         markers[:, :frames] = seed_world["markers"]
         torch.lerp(predicted, reprojected, BLEND_FACTOR, out=markers[:, frames:])  # (1 − f) predicted + f re-projected
-        new = {"reprojected_markers": reprojected, "joints": joints, "transl": transl, "global_orient": orient,
-               "body_pose": pose}  # fmt: skip
-        seed_of = {"reprojected_markers": "markers"}
+        if lock_feet:
+            track = torch.cat([seed_world["markers"][:, -1:, self.leg_fit_slots], predicted[:, :, self.leg_fit_slots]], 1)
+            targets = locked_feet(track, seed_world["body_markers"][:, -1, self.leg_fit_slots], CONTACT_POINTS, GAMMA_FPS)
+            pose = fit_legs(self.body, posed, targets)
+            posed = self.body(transl, orient, pose)
+            reprojected = self.body.skin_with_rows(posed, self.marker_rows)
+        new = {"predicted_markers": predicted, "reprojected_markers": reprojected, "joints": posed.joints,
+               "transl": transl, "global_orient": orient, "body_pose": pose}  # fmt: skip
+        seed_of = {"predicted_markers": "markers", "reprojected_markers": "body_markers"}
         fields = {name: torch.cat([seed_world[seed_of.get(name, name)], value], dim=1) for name, value in new.items()}
         soles = self.body.heights_with_rows(posed, self.sole_rows).amin(-1)  # (M, 10 - S)
         return {"markers": markers, **fields, "lowest_sole": torch.cat([soles.new_zeros(len(rows), frames), soles], 1)}
 
 
-SEED_FIELDS = ("markers", "joints", "transl", "global_orient", "body_pose")
-POSITION_FIELDS = ("markers", "reprojected_markers", "joints", "transl")
+SEED_FIELDS = ("markers", "body_markers", "joints", "transl", "global_orient", "body_pose")
+POSITION_FIELDS = ("markers", "predicted_markers", "reprojected_markers", "joints", "transl")
 
 
 def _ground(fields: dict[str, torch.Tensor], lowest_sole: torch.Tensor, seed_frames: torch.Tensor) -> None:

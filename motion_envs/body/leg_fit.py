@@ -1,0 +1,134 @@
+"""Fit a posed body's legs to target foot markers: analytic two-bone IK, batched, no iterations.
+
+GAMMA's body regressor recovers each frame's body from its markers independently, and its error (about 2 cm
+per marker) differs from frame to frame. At 40 fps a 1 cm error that changes between frames is 0.4 m/s of
+apparent foot motion, so a foot the predictor holds still slides on the regressed body: under the shipped
+GammaReach policy the loaded sole marker moves faster than 0.2 m/s in 30% of walking transitions of the
+predicted markers and in 80% of the regressed body's (runs of 128 bodies x 40 primitives). GAMMA's authors name
+this gap (appendix B.1: the regressor "cannot guarantee" a valid body; MOJO's optimisation-based fitting is
+better but 2 s per frame) and leave a real-time body optimiser to future work. `fit_legs` is ours: it keeps the
+regressed pelvis, spine and arms and moves only the hips, knees and ankles so that each foot lands where the
+predicted markers put it:
+
+1. the foot's rigid pose: the rotation and translation that best carry the body's ankle-borne foot markers
+   (`FOOT_FIT_MARKERS`: ankle, heel, first metatarsal, ball of the foot) onto the targets (Kabsch,
+   `roma.rigid_points_registration`); its translation moves the ankle joint, and the toes turn (smallest
+   rotation about their joint) so that the toe-tip marker points at its target;
+2. hip and knee: the knee stays in the plane of hip, ankle target and the current knee (so the leg does not
+   twist), the thigh and shin keep their lengths, and each bone turns by the smallest rotation onto its new
+   direction (a target out of reach gets the straight leg pointing at it);
+3. the ankle's world rotation is the Kabsch rotation times the regressed one.
+
+All in world axes on `BodyPose.rotations`; the result is SMPL-X local rotations (`body_pose` convention,
+`motion_envs.body.kinematics`), so `BodyModel` poses it as any other body.
+"""
+
+from __future__ import annotations
+
+import roma
+import torch
+
+from motion_envs.body.kinematics import BodyModel, BodyPose
+from motion_envs.body.markers import MARKER_NAMES, marker_ids
+from motion_envs.body.rotations import matrix_to_sixd
+from motion_envs.body.skeleton import PARENTS, joint_index
+
+FOOT_FIT_MARKERS: dict[str, tuple[str, ...]] = {
+    "left": ("LANK", "LHEE", "LMT1", "LRSTBEEF", "LTOE"),
+    "right": ("RANK", "RHEE", "RMT1", "RRSTBEEF", "RTOE"),
+}
+"""Each foot's fitted markers: four skinned (almost) only to the ankle joint, the rigid foot, then the toe tip."""
+RIGID_FOOT = torch.tensor([1.0, 1.0, 1.0, 1.0, 0.0])
+"""Kabsch weights of `FOOT_FIT_MARKERS`: the rigid foot only."""
+TOE_TIP = 4
+CONTACT_POINTS = (1, TOE_TIP)
+"""The heel and the toe tip in `FOOT_FIT_MARKERS`: the points a foot stands on (`foot_lock.locked_feet`)."""
+
+def leg_fit_marker_ids() -> torch.Tensor:
+    """(2, 5) vertex ids of `FOOT_FIT_MARKERS`, left then right."""
+    return torch.stack([marker_ids(FOOT_FIT_MARKERS[side]) for side in ("left", "right")])
+
+
+def leg_fit_marker_slots() -> torch.Tensor:
+    """(2, 5) positions of `FOOT_FIT_MARKERS` in `MARKER_NAMES` (a 67-marker array's rows), left then right."""
+    return torch.tensor([[MARKER_NAMES.index(name) for name in FOOT_FIT_MARKERS[side]] for side in ("left", "right")])
+
+
+def smallest_rotation(source: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """(..., 3) directions -> (..., 3, 3) the smallest rotation turning `source`'s direction onto `target`'s.
+    R = I + [w]x + [w]x² / (1 + c) with w = u x v, c = u . v of the unit vectors; exact for any pair that is not
+    opposite (the legs' corrections are a few degrees)."""
+    u = torch.nn.functional.normalize(source, dim=-1)
+    v = torch.nn.functional.normalize(target, dim=-1)
+    w = torch.linalg.cross(u, v)
+    c = (u * v).sum(-1)
+    zero = torch.zeros_like(c)
+    skew = torch.stack([zero, -w[..., 2], w[..., 1], w[..., 2], zero, -w[..., 0], -w[..., 1], w[..., 0], zero], -1)
+    skew = skew.unflatten(-1, (3, 3))
+    eye = torch.eye(3, dtype=source.dtype, device=source.device)
+    return eye + skew + skew @ skew / (1.0 + c).clamp_min(1e-6)[..., None, None]
+
+
+def two_bone(hip: torch.Tensor, knee: torch.Tensor, ankle: torch.Tensor, target: torch.Tensor,
+             forward: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:  # fmt: skip
+    """World rotations that put the ankle on `target`, keeping both bone lengths and the knee's plane.
+
+    Args:
+        hip, knee, ankle, target: (..., 3) joint positions and the ankle's target.
+        forward: (..., 3) the way the knee bends when the leg is straight (the plane is then undefined).
+
+    Returns:
+        thigh (..., 3, 3): the hip's new world rotation is thigh @ old; shin (..., 3, 3): the knee's is
+        shin @ thigh @ old.
+    """
+    thigh_length = (knee - hip).norm(dim=-1, keepdim=True)
+    shin_length = (ankle - knee).norm(dim=-1, keepdim=True)
+    reach = target - hip
+    distance = reach.norm(dim=-1, keepdim=True)
+    distance_clamped = distance.clamp((thigh_length - shin_length).abs() + 1e-3, thigh_length + shin_length)
+    along = reach / distance.clamp_min(1e-9)
+    bend = knee - hip + 1e-6 * forward  # the current knee's side of the hip-target line
+    bend = torch.nn.functional.normalize(bend - (bend * along).sum(-1, keepdim=True) * along, dim=-1)
+    cosine = (thigh_length**2 + distance_clamped**2 - shin_length**2) / (2.0 * thigh_length * distance_clamped)
+    sine = (1.0 - cosine.clamp(-1.0, 1.0) ** 2).sqrt()
+    new_knee = hip + thigh_length * (cosine * along + sine * bend)
+    thigh = smallest_rotation(knee - hip, new_knee - hip)
+    turned_shin = (thigh @ (ankle - knee)[..., None])[..., 0]
+    shin = smallest_rotation(turned_shin, hip + distance_clamped * along - new_knee)
+    return thigh, shin
+
+
+def fit_legs(body: BodyModel, posed: BodyPose, target_markers: torch.Tensor) -> torch.Tensor:
+    """Local rotations of `posed` with both legs fitted to the targets of their feet (module doc).
+
+    Args:
+        body: the body model that posed `posed`.
+        posed: BodyPose with joints (..., 22, 3) and rotations (..., 22, 3, 3).
+        target_markers: (..., 2, 5, 3) where `leg_fit_marker_ids` (left, right) should be.
+
+    Returns:
+        (..., 21, 6) SMPL-X local rotations (6-D), the regressed ones off the legs.
+    """
+    rotations = posed.rotations.clone()  # world
+    current = body.skin(posed, leg_fit_marker_ids().flatten().to(posed.joints.device))
+    current = current.unflatten(-2, (2, -1))  # (..., 2, 5, 3)
+    weights = RIGID_FOOT.to(current).expand(current.shape[:-1])
+    foot_turn, foot_shift = roma.rigid_points_registration(current, target_markers, weights)  # (..., 2, 3, 3), (..., 2, 3)
+    for side_index, side in enumerate(("left", "right")):
+        hip, knee, ankle, toes = (joint_index(f"{side}_{name}") for name in ("hip", "knee", "ankle", "foot"))
+        turn, shift = foot_turn[..., side_index, :, :], foot_shift[..., side_index, :]
+        joints = posed.joints
+        target = (turn @ joints[..., ankle, :, None])[..., 0] + shift
+        forward = rotations[..., hip, :, 1]  # the rest body faces +y, and knees bend forwards
+        thigh, shin = two_bone(joints[..., hip, :], joints[..., knee, :], joints[..., ankle, :], target, forward)
+        rotations[..., hip, :, :] = thigh @ posed.rotations[..., hip, :, :]
+        rotations[..., knee, :, :] = shin @ thigh @ posed.rotations[..., knee, :, :]
+        rotations[..., ankle, :, :] = turn @ posed.rotations[..., ankle, :, :]
+        toe_joint = (turn @ joints[..., toes, :, None])[..., 0] + shift
+        toe_tip = (turn @ current[..., side_index, TOE_TIP, :, None])[..., 0] + shift
+        toe_turn = smallest_rotation(toe_tip - toe_joint, target_markers[..., side_index, TOE_TIP, :] - toe_joint)
+        rotations[..., toes, :, :] = toe_turn @ turn @ posed.rotations[..., toes, :, :]
+    parents = torch.tensor(PARENTS[1:], device=rotations.device)
+    local_world = rotations[..., parents, :, :].transpose(-1, -2) @ rotations[..., 1:, :, :]  # (..., 21, 3, 3)
+    axes = body.axes_to_world.to(local_world.dtype)
+    return matrix_to_sixd(axes.T @ local_world @ axes)

@@ -19,8 +19,8 @@ predicted markers put it:
    direction (a target out of reach gets the straight leg pointing at it);
 3. the ankle's world rotation is the Kabsch rotation times the regressed one.
 
-All in world axes on `BodyPose.rotations`; the result is SMPL-X local rotations (`body_pose` convention,
-`motion_envs.body.kinematics`), so `BodyModel` poses it as any other body.
+All in world axes on `BodyPose.rotations`; the result is SMPL-X local rotations as matrices (`body_pose`
+convention, `motion_envs.body.kinematics`; `BodyModel.from_matrices` poses them).
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ import torch
 
 from motion_envs.body.kinematics import BodyModel, BodyPose
 from motion_envs.body.markers import MARKER_NAMES, marker_ids
-from motion_envs.body.rotations import matrix_to_sixd
+from motion_envs.body.rotations import matrix_to_sixd, sixd_to_matrix
 from motion_envs.body.skeleton import PARENTS, joint_index
 
 FOOT_FIT_MARKERS: dict[str, tuple[str, ...]] = {
@@ -43,6 +43,10 @@ RIGID_FOOT = torch.tensor([1.0, 1.0, 1.0, 1.0, 0.0])
 TOE_TIP = 4
 CONTACT_POINTS = (1, TOE_TIP)
 """The heel and the toe tip in `FOOT_FIT_MARKERS`: the points a foot stands on (`foot_lock.locked_feet`)."""
+
+LEG_JOINTS = tuple(joint_index(f"{side}_{part}") for side in ("left", "right") for part in ("hip", "knee", "ankle", "foot"))
+"""The joints whose rotations the fit sets."""
+
 
 def leg_fit_marker_ids() -> torch.Tensor:
     """(2, 5) vertex ids of `FOOT_FIT_MARKERS`, left then right."""
@@ -98,16 +102,19 @@ def two_bone(hip: torch.Tensor, knee: torch.Tensor, ankle: torch.Tensor, target:
     return thigh, shin
 
 
-def fit_legs(body: BodyModel, posed: BodyPose, target_markers: torch.Tensor) -> torch.Tensor:
-    """Local rotations of `posed` with both legs fitted to the targets of their feet (module doc).
+def fit_legs(body: BodyModel, posed: BodyPose, pose: torch.Tensor, target_markers: torch.Tensor) -> torch.Tensor:
+    """`pose` with both legs fitted to the targets of their feet (module doc).
 
     Args:
         body: the body model that posed `posed`.
         posed: BodyPose with joints (..., 22, 3) and rotations (..., 22, 3, 3).
+        pose: (..., 21, 3, 3) the SMPL-X local rotations it was posed with.
         target_markers: (..., 2, 5, 3) where `leg_fit_marker_ids` (left, right) should be.
 
     Returns:
-        (..., 21, 6) SMPL-X local rotations (6-D), the regressed ones off the legs.
+        (..., 21, 3, 3) SMPL-X local rotations (`BodyModel.from_matrices`): `pose` itself off the legs (not
+        recomputed from the world rotations, whose rounding an autoregressive prior would compound), the legs'
+        made orthonormal (Gram-Schmidt) for the same reason.
     """
     rotations = posed.rotations.clone()  # world
     current = body.skin(posed, leg_fit_marker_ids().flatten().to(posed.joints.device))
@@ -128,7 +135,10 @@ def fit_legs(body: BodyModel, posed: BodyPose, target_markers: torch.Tensor) -> 
         toe_tip = (turn @ current[..., side_index, TOE_TIP, :, None])[..., 0] + shift
         toe_turn = smallest_rotation(toe_tip - toe_joint, target_markers[..., side_index, TOE_TIP, :] - toe_joint)
         rotations[..., toes, :, :] = toe_turn @ turn @ posed.rotations[..., toes, :, :]
-    parents = torch.tensor(PARENTS[1:], device=rotations.device)
-    local_world = rotations[..., parents, :, :].transpose(-1, -2) @ rotations[..., 1:, :, :]  # (..., 21, 3, 3)
+    legs = torch.tensor(LEG_JOINTS, device=rotations.device)
+    parents = torch.tensor([PARENTS[joint] for joint in LEG_JOINTS], device=rotations.device)
+    local_world = rotations[..., parents, :, :].transpose(-1, -2) @ rotations[..., legs, :, :]  # (..., 8, 3, 3)
     axes = body.axes_to_world.to(local_world.dtype)
-    return matrix_to_sixd(axes.T @ local_world @ axes)
+    fitted = pose.clone()
+    fitted[..., legs - 1, :, :] = sixd_to_matrix(matrix_to_sixd(axes.T @ local_world @ axes))
+    return fitted

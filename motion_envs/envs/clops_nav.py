@@ -185,6 +185,9 @@ class ClopsNavConfig:
     """z = latent_scale · ε, ε ~ N(0, I) every frame. The paper samples (1); we decode the prior's mean (0): with
     our small-data prior, sampling raised foot skating from 44% to 74% of frames and collisions from 23% to 32% of
     actions under random actions (64 bodies × 15 actions, `open`)."""
+    lock_feet: bool = False
+    """Hold a loaded foot where it stood, every frame (`WandrStepper`); off by default, as WandrReach's (the
+    prior feeds its held legs back)."""
     collision_every: int = 3
     """Frames between collision checks within a chunk (and its last frame)."""
     collision_tolerance: float = 0.02
@@ -304,7 +307,8 @@ class ClopsNavCore:
         self.device = torch.device(config.device)
         self.prior = (prior or load_clops(config.weights)).to(self.device).eval()
         self.body = BodyModel().to(self.device)
-        self.stepper = ClopsStepper(self.prior, self.body, reach_distance=config.reach_distance, reach_angle=config.reach_angle)
+        self.stepper = ClopsStepper(self.prior, self.body, reach_distance=config.reach_distance, reach_angle=config.reach_angle,
+                                    lock_feet=config.lock_feet)  # fmt: skip
         self.starts = StartBodies(self.stepper, self.device)
         self.slots: list[SceneSlot] = []
         self._slot_of: dict[tuple[str, int], int] = {}

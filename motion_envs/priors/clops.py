@@ -34,7 +34,7 @@ from motion_envs.body import BodyModel
 from motion_envs.body.frames import MANNEQUIN_TO_WORLD
 from motion_envs.body.rotations import about_z, matrix_to_sixd, wrap_angle
 from motion_envs.priors.wandr import WandrPrior, WandrStepper
-from motion_envs.priors.wandr_features import WandrState, condition, heading, integrate, make_state
+from motion_envs.priors.wandr_features import WandrState, condition, heading
 
 HEAD_CHAIN = (2, 5, 8, 11, 14)
 """`body_pose` rows of spine1, spine2, spine3, neck and head: the head's rotation is orient @ these in order."""
@@ -128,10 +128,10 @@ class ClopsStepper(WandrStepper):
     """Rolls bodies towards target head poses with a trained `ClopsPrior` (feet kept on the floor, as WANDR's)."""
 
     def __init__(self, prior: ClopsPrior, body: BodyModel | None = None, ground_feet: bool = True, *,
-                 reach_distance: float, reach_angle: float) -> None:  # fmt: skip
+                 reach_distance: float, reach_angle: float, lock_feet: bool = False) -> None:  # fmt: skip
         """reach_distance (m, on the ground) and reach_angle (rad, yaw): when a head counts as at its target
         (`ClopsNavConfig` holds the defaults and their measurements)."""
-        super().__init__(prior, body, ground_feet, intentions=())  # the intention slot holds the head target
+        super().__init__(prior, body, ground_feet, intentions=(), lock_feet=lock_feet)  # the intention slot: the head target
         self.reach_distance, self.reach_angle = reach_distance, reach_angle
 
     def head_condition(self, state: WandrState, target: HeadPose) -> torch.Tensor:
@@ -141,9 +141,7 @@ class ClopsStepper(WandrStepper):
     def step_towards(self, state: WandrState, z: torch.Tensor, target: HeadPose) -> tuple[WandrState, torch.Tensor]:
         """The next frame of bodies decoded with latents z (B, latent), and its foot vertices (B, V, 3)."""
         delta = self.prior.denormalise_delta(self.prior.generate(z, self.head_condition(state, target)))
-        transl, orient, pose = integrate(state.transl, state.orient, state.pose, delta)
-        following, posed = make_state(self.body, transl, orient, pose, delta)
-        return self.grounded(following, self.feet(posed))
+        return self.advance(state, delta)
 
     def reached(self, state: WandrState, target: HeadPose) -> torch.Tensor:
         """(B,) bool: the head within `reach_distance` (on the ground plane) and `reach_angle` (yaw) of its target."""

@@ -24,10 +24,12 @@ import torch
 from torch import nn
 
 from motion_envs.body import BodyModel, BodyPose
+from motion_envs.body.foot_lock import locked_feet
+from motion_envs.body.leg_fit import CONTACT_POINTS, fit_legs, leg_fit_marker_ids
 from motion_envs.body.markers import foot_vertex_ids
 from motion_envs.priors.inference_linear import InferenceSequential
 from motion_envs.priors.wandr_features import (
-    CONDITION_DIM, DELTA_DIM, INTENTIONS, WandrState, condition, integrate, intention, make_state,
+    CONDITION_DIM, DELTA_DIM, FPS, INTENTIONS, WandrState, condition, integrate, intention, make_state,
 )  # fmt: skip
 
 
@@ -151,15 +153,21 @@ class WandrStepper:
     its lowest foot vertex touches the floor: our prior's integrated height
     drifts (see `wandr_features`), and a walking-and-reaching body always
     has a foot down. The paper's generation has no such step; set it off
-    to see the prior alone. `intentions` overrides which intention parts the
+    to see the prior alone. With `lock_feet` each frame's legs are fitted
+    (`motion_envs.body.leg_fit`) so that a foot loaded in the previous frame
+    stays where it stood (`motion_envs.body.foot_lock`; the previous frame's
+    body is the prediction's start, so nothing carries over). Unlike GAMMA's
+    (whose next seed keeps the regressor's bodies), the held legs are fed
+    back to the prior. `intentions` overrides which intention parts the
     prior is shown (default: those it was trained with; () shows none).
     """
 
     def __init__(self, prior: WandrPrior, body: BodyModel | None = None, ground_feet: bool = True,
-                 intentions: tuple[str, ...] | None = None) -> None:  # fmt: skip
+                 intentions: tuple[str, ...] | None = None, lock_feet: bool = False) -> None:  # fmt: skip
         self.prior = prior
         self.body = body or BodyModel()
-        self.ground_feet = ground_feet
+        self.ground_feet, self.lock_feet = ground_feet, lock_feet
+        self.fit_rows = self.body.skin_rows(leg_fit_marker_ids().flatten().to(self.body.offsets.device))
         self.intentions = prior.config.intentions if intentions is None else tuple(intentions)
         self.foot_rows = self.body.skin_rows(foot_vertex_ids().to(self.body.offsets.device))
 
@@ -176,8 +184,19 @@ class WandrStepper:
              frames_left: torch.Tensor) -> tuple[WandrState, torch.Tensor]:  # fmt: skip
         """The next frame of bodies `state` (batch B) decoded with latents z (B, latent), and its foot vertices (B, V, 3)."""
         delta = self.prior.denormalise_delta(self.prior.generate(z, self.condition(state, goal, frames_left)))
+        return self.advance(state, delta)
+
+    def advance(self, state: WandrState, delta: torch.Tensor) -> tuple[WandrState, torch.Tensor]:
+        """Bodies `state` moved by their decoded deltas (B, 135): integrated, feet held, grounded; and their foot
+        vertices (B, V, 3)."""
         transl, orient, pose = integrate(state.transl, state.orient, state.pose, delta)
         following, posed = make_state(self.body, transl, orient, pose, delta)
+        if self.lock_feet:
+            before = self.body.skin_with_rows(self.body.from_matrices(state.transl, state.orient, state.pose), self.fit_rows)
+            after = self.body.skin_with_rows(posed, self.fit_rows)
+            track = torch.stack([before, after], dim=1).unflatten(-2, (2, -1))  # (B, 2 frames, 2 feet, 5, 3)
+            targets = locked_feet(track, track[:, 0], CONTACT_POINTS, FPS)[:, 0]
+            following, posed = make_state(self.body, transl, orient, fit_legs(self.body, posed, pose, targets), delta)
         return self.grounded(following, self.feet(posed))
 
     def grounded(self, state: WandrState, feet: torch.Tensor) -> tuple[WandrState, torch.Tensor]:

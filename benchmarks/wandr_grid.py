@@ -59,7 +59,8 @@ printed below the table.
 Rows: the WANDR sampler (z ~ N(0, I) every frame) on the shipped prior and
 on every ablation / data variant whose weights are in `runs/wandr_weights/`
 (`--variants-dir`; they are trained with `motion-envs train wandr
---intentions ... --weights runs/wandr_weights/NAME.pt` and not shipped); the shipped prior without `ground_feet` (the prior alone);
+--intentions ... --weights runs/wandr_weights/NAME.pt` and not shipped); the sampler and the paced sampler without the env's foot
+rule (`lock_feet`), and the shipped prior without it and without `ground_feet` (the prior alone);
 latent optimisation (`baselines.latent_optimisation`: "VAE + opt" with a
 zero intention from random latents, "WANDR + opt" refining the sampler's
 latents) on 2 start poses × 1 sample (250 rollouts: it backpropagates
@@ -179,6 +180,7 @@ class GridRow:
     policy: Path | None = None
     paced: bool = False
     ground_feet: bool = True
+    lock_feet: bool = True
     poses: int = 6
     samples: int = 5
 
@@ -204,7 +206,7 @@ def run_shard(row: GridRow, first: int, last: int, seed: int) -> dict:
     from agents.controllers import PolicyLatent
 
     torch.manual_seed(seed)
-    core = WandrReachCore(WandrReachConfig(ground_feet=row.ground_feet), prior=cached_prior(row.prior))
+    core = WandrReachCore(WandrReachConfig(ground_feet=row.ground_feet, lock_feet=row.lock_feet), prior=cached_prior(row.prior))
     bodies = torch.arange(first, last)
     start = grid_start(core, row.poses, row.samples, row.paced)[0].index(bodies)
     began = time.perf_counter()
@@ -214,7 +216,7 @@ def run_shard(row: GridRow, first: int, last: int, seed: int) -> dict:
         controller = PolicyLatent(row.policy, deterministic=row.controller == "policy-mean", seed=seed, bodies=bodies)
     else:
         intentions = () if row.controller == "vae-opt" else None
-        core.stepper = WandrStepper(core.prior, core.body, core.config.ground_feet, intentions)
+        core.stepper = WandrStepper(core.prior, core.body, core.config.ground_feet, intentions, core.config.lock_feet)
         frames, noise = core.config.max_frames, BodyNoise(seed, bodies)
         initial = torch.stack([noise(len(bodies), core.prior.config.latent) for _ in range(frames)], dim=1)
         controller = LatentSequence(optimise_latents(core.stepper, start, frames, initial))
@@ -364,7 +366,9 @@ def grid_rows(quick: bool = False, weights_dir: Path | None = None, policies: li
     if not runs:
         raise FileNotFoundError(f"no WANDR weights in {weights_dir}" + (f" for rows matching {only!r}" if only else ""))
     if only is None and shipped.exists():
-        runs["WANDR sampler, prior alone (no ground_feet)"] = GridRow(shipped, ground_feet=False, **grid)
+        runs["WANDR sampler, without the foot rule (lock_feet)"] = GridRow(shipped, lock_feet=False, **grid)
+        runs[f"{PACED_LABEL}, without the foot rule"] = GridRow(shipped, paced=True, lock_feet=False, **grid)
+        runs["WANDR sampler, prior alone (no ground_feet, no lock_feet)"] = GridRow(shipped, ground_feet=False, lock_feet=False, **grid)
         if optimisation:
             few = {"poses": OPTIMISATION_POSES, "samples": 1}
             runs[f"VAE + opt (zero intention; {OPTIMISATION_POSES} poses × 1 sample)"] = GridRow(shipped, "vae-opt", **few)

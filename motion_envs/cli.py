@@ -141,6 +141,12 @@ def _bench_render(args: argparse.Namespace) -> int:
     return render_speed()
 
 
+def _bench_gamma_feet(args: argparse.Namespace) -> int:
+    from benchmarks.gamma_feet import main as gamma_feet
+
+    return gamma_feet(bodies=args.bodies, primitives=args.primitives, seed=args.seed)
+
+
 def _bench_gamma_realism(args: argparse.Namespace) -> int:
     from benchmarks.gamma_realism import main as gamma_realism
 
@@ -673,6 +679,11 @@ def parser() -> argparse.ArgumentParser:
     realism.add_argument("--primitives", type=int, default=20)
     realism.add_argument("--seed", type=int, default=0)
     realism.set_defaults(run=_bench_gamma_realism)
+    feet = bench.add_parser("gamma-feet", help="the GAMMA envs' foot rule on walking bodies: foot skating with and without it")
+    feet.add_argument("--bodies", type=int, default=128)
+    feet.add_argument("--primitives", type=int, default=30)
+    feet.add_argument("--seed", type=int, default=0)
+    feet.set_defaults(run=_bench_gamma_feet)
 
     play = commands.add_parser("play", help="run episodes with a policy or baseline; write a video and a summary")
     play.add_argument("env_id", help="motion_envs/GammaReach-v0, motion_envs/GammaWander-v0, motion_envs/WandrReach-v0 or motion_envs/ClopsNav-v0")

@@ -186,8 +186,8 @@ class ClopsNavConfig:
     our small-data prior, sampling raised foot skating from 44% to 74% of frames and collisions from 23% to 32% of
     actions under random actions (64 bodies × 15 actions, `open`)."""
     lock_feet: bool = False
-    """Hold a loaded foot where it stood, every frame (`WandrStepper`); off by default, as WandrReach's (the
-    prior feeds its held legs back)."""
+    """Hold a loaded foot where it stood, every frame (`WandrStepper`). Off by default, unlike WandrReach: the
+    prior feeds the held legs back, and the shipped DQN policies were trained without them."""
     collision_every: int = 3
     """Frames between collision checks within a chunk (and its last frame)."""
     collision_tolerance: float = 0.02

@@ -12,7 +12,7 @@ from motion_envs.body.leg_fit import CONTACT_POINTS, fit_legs, leg_fit_marker_id
 from motion_envs.body.rotations import matrix_to_sixd, rotation_matrix
 from motion_envs.body.skeleton import JOINT_NAMES
 from motion_envs.envs.gamma_reach import SOLE_MARKERS, GammaReachConfig, GammaReachCore
-from motion_envs.metrics import loaded_foot_skating, loaded_slide
+from motion_envs.metrics import loaded_foot_skating
 from motion_envs.priors.gamma_generator import GammaGenerator
 
 MOVED_JOINTS = [i for i, name in enumerate(JOINT_NAMES) if any(part in name for part in ("knee", "ankle", "foot"))]
@@ -97,7 +97,7 @@ def gamma() -> GammaGenerator:
 def test_the_foot_rule_keeps_gammas_motion_and_stills_the_loaded_feet(gamma):
     """Random latents from the shipped start poses, the same with and without `lock_feet` (no floor rule, so that
     nothing else differs): the blended markers, which seed the next primitive, and the pelvis agree to float
-    rounding over 6 primitives; the bodies' loaded heel or toe marker slides less than half as much."""
+    rounding over 6 primitives; the bodies' loaded heel or toe marker slides less than half as often."""
     core = GammaReachCore(GammaReachConfig(precision="float32", ground_feet=False), gamma)
     start = core.sample_initial_state([np.random.default_rng([7, i]) for i in range(32)])
     latents = torch.randn(6, 32, 128, generator=torch.Generator().manual_seed(7))
@@ -109,12 +109,12 @@ def test_the_foot_rule_keeps_gammas_motion_and_stills_the_loaded_feet(gamma):
             markers.append(primitive.markers)
             pelvis.append(primitive.transl)
             new = primitive.new_frames()[:, 1:]
-            slide.append((loaded_slide(primitive.reprojected_markers[:, :, SOLE_MARKERS], FPS) * new).sum() / new.sum())
+            slide.append((loaded_foot_skating(primitive.reprojected_markers[:, :, SOLE_MARKERS], FPS) * new).sum() / new.sum())
         runs[lock] = torch.stack(markers), torch.stack(pelvis), torch.stack(slide).mean()
     assert torch.allclose(runs[True][0], runs[False][0], atol=1e-4)
     assert torch.allclose(runs[True][1], runs[False][1], atol=1e-4)
-    # measured (AMX Xeon, fp32): 0.047 m/s beyond 0.2 m/s per transition without the rule, 0.019 with it
-    assert runs[False][2] > 0.02 and runs[True][2] < 0.5 * runs[False][2], (runs[False][2], runs[True][2])
+    # measured (AMX Xeon, fp32): the loaded heel or toe slides in 14.3% of transitions without the rule, 6.3% with it
+    assert runs[False][2] > 0.05 and runs[True][2] < 0.5 * runs[False][2], (runs[False][2], runs[True][2])
 
 
 def test_wandrs_held_legs_stay_orthonormal_and_slide_less():

@@ -16,7 +16,7 @@ predicted markers put it:
    rotation about their joint) so that the toe-tip marker points at its target;
 2. hip and knee: the knee stays in the plane of hip, ankle target and the current knee (so the leg does not
    twist), the thigh and shin keep their lengths, and each bone turns by the smallest rotation onto its new
-   direction (a target out of reach gets the straight leg pointing at it);
+   direction (a target out of reach is pulled horizontally towards the hip, keeping its height);
 3. the ankle's world rotation is the Kabsch rotation times the regressed one.
 
 All in world axes on `BodyPose.rotations`; the result is SMPL-X local rotations as matrices (`body_pose`
@@ -73,9 +73,23 @@ def smallest_rotation(source: torch.Tensor, target: torch.Tensor) -> torch.Tenso
     return eye + skew + skew @ skew / (1.0 + c).clamp_min(1e-6)[..., None, None]
 
 
+def within_reach(hip: torch.Tensor, target: torch.Tensor, length: torch.Tensor) -> torch.Tensor:
+    """(..., 3) `target` pulled horizontally towards `hip` until it is within `length` (..., 1) of it, its height
+    kept (a target higher or lower than `length` goes straight above or below the hip): a leg that cannot reach
+    its foot's target leaves the foot short on the floor, not in the air, so the floor rule does not sink the
+    body to put it down."""
+    offset = target - hip
+    vertical = torch.maximum(torch.minimum(offset[..., 2:], length), -length)
+    room = (length**2 - vertical**2).clamp_min(0.0).sqrt()
+    horizontal = offset[..., :2]
+    scale = (room / horizontal.norm(dim=-1, keepdim=True).clamp_min(1e-9)).clamp_max(1.0)
+    return hip + torch.cat([horizontal * scale, vertical], dim=-1)
+
+
 def two_bone(hip: torch.Tensor, knee: torch.Tensor, ankle: torch.Tensor, target: torch.Tensor,
              forward: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:  # fmt: skip
-    """World rotations that put the ankle on `target`, keeping both bone lengths and the knee's plane.
+    """World rotations that put the ankle on `target` (`within_reach` of the straight leg), keeping both bone
+    lengths and the knee's plane.
 
     Args:
         hip, knee, ankle, target: (..., 3) joint positions and the ankle's target.
@@ -87,7 +101,7 @@ def two_bone(hip: torch.Tensor, knee: torch.Tensor, ankle: torch.Tensor, target:
     """
     thigh_length = (knee - hip).norm(dim=-1, keepdim=True)
     shin_length = (ankle - knee).norm(dim=-1, keepdim=True)
-    reach = target - hip
+    reach = within_reach(hip, target, thigh_length + shin_length) - hip
     distance = reach.norm(dim=-1, keepdim=True)
     distance_clamped = distance.clamp((thigh_length - shin_length).abs() + 1e-3, thigh_length + shin_length)
     along = reach / distance.clamp_min(1e-9)

@@ -17,8 +17,11 @@ and N latent codes and, batched over bodies:
    predicted feet and holds a loaded foot where it touched down
    (`motion_envs.body.foot_lock`, `motion_envs.body.leg_fit`): the regressor
    recovers every frame on its own, so its feet jitter by ~1 cm from frame to
-   frame and slide where the prediction holds them still. Only the bodies
-   change (legs below the hips; pelvis, spine, arms and head are the
+   frame and slide where the prediction holds them still. Only the feet's
+   horizontal positions follow the prediction; their heights stay the
+   regressor's (the predicted feet sit ~2 cm higher under the pelvis, and
+   with the floor rule that sank random-latent bodies by 1.8 cm). Only the
+   bodies change (legs below the hips; pelvis, spine, arms and head are the
    regressor's): the blend and so the next seed use the regressor's own
    re-projection, so the prior's motion, and every policy trained on it,
    goes where it went without the rule. Off in `step` alone, the raw prior;
@@ -266,6 +269,7 @@ class GammaGenerator(torch.nn.Module):
         if lock_feet:
             track = torch.cat([seed_world["markers"][:, -1:, self.leg_fit_slots], predicted[:, :, self.leg_fit_slots]], 1)
             targets = locked_feet(track, seed_world["body_markers"][:, -1, self.leg_fit_slots], CONTACT_POINTS, GAMMA_FPS)
+            targets[..., 2] = reprojected[:, :, self.leg_fit_slots, 2]  # heights: the regressor's (module doc, 5)
             pose = matrix_to_sixd(fit_legs(self.body, posed, rotation_matrix(pose), targets))
             posed = self.body(transl, orient, pose)
             reprojected = self.body.skin_with_rows(posed, self.marker_rows)

@@ -98,7 +98,7 @@ def within_reach(hip: torch.Tensor, target: torch.Tensor, length: torch.Tensor) 
     body to put it down."""
     offset = target - hip
     vertical = torch.maximum(torch.minimum(offset[..., 2:], length), -length)
-    room = (length**2 - vertical**2).clamp_min(0.0).sqrt()
+    room = (length**2 - vertical**2).clamp_min(1e-12).sqrt()  # not 0: a finite gradient for latent optimisation
     horizontal = offset[..., :2]
     scale = (room / horizontal.norm(dim=-1, keepdim=True).clamp_min(1e-9)).clamp_max(1.0)
     return hip + torch.cat([horizontal * scale, vertical], dim=-1)
@@ -126,7 +126,7 @@ def two_bone(hip: torch.Tensor, knee: torch.Tensor, ankle: torch.Tensor, target:
     bend = knee - hip + 1e-6 * forward  # the current knee's side of the hip-target line
     bend = torch.nn.functional.normalize(bend - (bend * along).sum(-1, keepdim=True) * along, dim=-1)
     cosine = (thigh_length**2 + distance_clamped**2 - shin_length**2) / (2.0 * thigh_length * distance_clamped)
-    sine = (1.0 - cosine.clamp(-1.0, 1.0) ** 2).sqrt()
+    sine = (1.0 - cosine.clamp(-1.0, 1.0) ** 2).clamp_min(1e-12).sqrt()  # not 0: a finite gradient
     new_knee = hip + thigh_length * (cosine * along + sine * bend)
     thigh = smallest_rotation(knee - hip, new_knee - hip)
     turned_shin = (thigh @ (ankle - knee)[..., None])[..., 0]

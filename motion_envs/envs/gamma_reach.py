@@ -53,11 +53,12 @@ prior without it (`ground_feet=False`).
 
 ## Feet
 
-With `lock_feet` (default) each body's legs are fitted to the predicted feet and a loaded foot is held where it
-touched down (`GammaGenerator.step`, `motion_envs.body.foot_lock`): the body regressor recovers every frame on
-its own, and its feet slide where the prediction holds them. Only the legs change; the next seed and so the
-motion are the prior's (the shipped policies behave as without the rule). `lock_feet=False` shows the
-regressor's bodies.
+With `lock_feet` (default) each body's legs are fitted so that its feet stand where the predicted markers put
+them on the ground (their heights stay the regressor's), and a loaded foot is held where it touched down
+(`GammaGenerator.step`, `motion_envs.body.foot_lock`): the body regressor recovers every frame on its own, and
+its feet slide where the prediction holds them. Only the legs change; the next seed and so the motion are the
+prior's (the shipped policies behave as without the rule, up to the floor rule's lift of the refitted bodies).
+`lock_feet=False` shows the regressor's bodies.
 
 ## Episode End
 

@@ -355,6 +355,7 @@ def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False,
         "the clean data 0.08-0.16); head low: share of generated frames with the head below 1.38 m (`rewards.UPRIGHT_HEAD`; the "
         "clean data's walking 15% test, 27% training). Search rows: 16 roots, 4 children per node, top-K kept, the release's node cost (contact + "
         "0.1 × orientation + 0.1 × distance) or distance alone (`SearchCost.distance_only`). Policies sample their latents. "
+        "Bodies as the env makes them: the floor and foot rules on (`ground_feet`, `lock_feet`; `gamma_feet.md` compares). "
         f"Pairs run in groups of {PAIRS_PER_TASK} (`benchmarks.fanout`), "
         + ("in this process" if ray_address is None else f"as Ray tasks ({ray_address})") + "; seconds: a row's groups, summed.",
         "", *table(rows, PAPER_ROWS), "",

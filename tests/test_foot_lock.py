@@ -45,13 +45,14 @@ def test_fitted_legs_put_the_feet_on_reachable_targets_and_leave_the_rest(body):
     moved[:, legs] = matrix_to_sixd(rotation_matrix(pose[:, legs]) @ rotation_matrix(torch.randn(64, 8, 3) * 0.15))
     targets = _feet(body, transl, orient, moved)
     posed = body(transl, orient, pose)
-    fitted = body(transl, orient, matrix_to_sixd(fit_legs(body, posed, rotation_matrix(pose), targets)))
+    own = _feet(body, transl, orient, pose)
+    fitted = body(transl, orient, matrix_to_sixd(fit_legs(body, posed, rotation_matrix(pose), own, targets)))
     assert (_feet(body, transl, orient, pose) - targets).norm(dim=-1).mean() > 0.03
     error = (body.skin(fitted, leg_fit_marker_ids().flatten()).unflatten(-2, (2, -1)) - targets).norm(dim=-1)
     assert error.max() < 3e-3 and error.mean() < 5e-4  # exact but for the ball marker's 14% skinning to the toes
     others = [i for i in range(len(JOINT_NAMES)) if i not in MOVED_JOINTS]
     assert torch.allclose(fitted.joints[:, others], posed.joints[:, others], atol=1e-5)
-    again = body(transl, orient, matrix_to_sixd(fit_legs(body, posed, rotation_matrix(pose), _feet(body, transl, orient, pose))))
+    again = body(transl, orient, matrix_to_sixd(fit_legs(body, posed, rotation_matrix(pose), own, own)))
     assert torch.allclose(again.joints, posed.joints, atol=1e-5)
 
 

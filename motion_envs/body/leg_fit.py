@@ -134,13 +134,15 @@ def two_bone(hip: torch.Tensor, knee: torch.Tensor, ankle: torch.Tensor, target:
     return thigh, shin
 
 
-def fit_legs(body: BodyModel, posed: BodyPose, pose: torch.Tensor, target_markers: torch.Tensor) -> torch.Tensor:
+def fit_legs(body: BodyModel, posed: BodyPose, pose: torch.Tensor, current: torch.Tensor,
+             target_markers: torch.Tensor) -> torch.Tensor:  # fmt: skip
     """`pose` with both legs fitted to the targets of their feet (module doc).
 
     Args:
         body: the body model that posed `posed`.
         posed: BodyPose with joints (..., 22, 3) and rotations (..., 22, 3, 3).
         pose: (..., 21, 3, 3) the SMPL-X local rotations it was posed with.
+        current: (..., 2, 5, 3) `leg_fit_marker_ids` (left, right) on `posed` (the callers have skinned them).
         target_markers: (..., 2, 5, 3) where `leg_fit_marker_ids` (left, right) should be.
 
     Returns:
@@ -149,7 +151,6 @@ def fit_legs(body: BodyModel, posed: BodyPose, pose: torch.Tensor, target_marker
         made orthonormal (Gram-Schmidt) for the same reason.
     """
     joints, world = posed.joints, posed.rotations
-    current = body.skin(posed, leg_fit_marker_ids().flatten().to(joints.device)).unflatten(-2, (2, -1))  # (..., 2, 5, 3)
     turn, shift = rigid_foot_motion(current, target_markers)  # (..., 2, 3, 3), (..., 2, 3)
     hip, knee, ankle, toes = (joints[..., ids, :] for ids in LEG_PARTS)  # (..., 2, 3) each
     target = (turn @ ankle[..., None])[..., 0] + shift

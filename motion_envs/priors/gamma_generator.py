@@ -270,7 +270,7 @@ class GammaGenerator(torch.nn.Module):
             track = torch.cat([seed_world["markers"][:, -1:, self.leg_fit_slots], predicted[:, :, self.leg_fit_slots]], 1)
             targets = locked_feet(track, seed_world["body_markers"][:, -1, self.leg_fit_slots], CONTACT_POINTS, GAMMA_FPS)
             targets[..., 2] = reprojected[:, :, self.leg_fit_slots, 2]  # heights: the regressor's (module doc, 5)
-            pose = matrix_to_sixd(fit_legs(self.body, posed, rotation_matrix(pose), targets))
+            pose = matrix_to_sixd(fit_legs(self.body, posed, rotation_matrix(pose), reprojected[:, :, self.leg_fit_slots], targets))
             posed = self.body(transl, orient, pose)
             reprojected = self.body.skin_with_rows(posed, self.marker_rows)
         new = {"predicted_markers": predicted, "reprojected_markers": reprojected, "joints": posed.joints,

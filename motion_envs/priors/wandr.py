@@ -196,7 +196,7 @@ class WandrStepper:
             after = self.body.skin_with_rows(posed, self.fit_rows)
             track = torch.stack([before, after], dim=1).unflatten(-2, (2, -1))  # (B, 2 frames, 2 feet, 5, 3)
             targets = locked_feet(track, track[:, 0], CONTACT_POINTS, FPS)[:, 0]
-            following, posed = make_state(self.body, transl, orient, fit_legs(self.body, posed, pose, targets), delta)
+            following, posed = make_state(self.body, transl, orient, fit_legs(self.body, posed, pose, track[:, 1], targets), delta)
         return self.grounded(following, self.feet(posed))
 
     def grounded(self, state: WandrState, feet: torch.Tensor) -> tuple[WandrState, torch.Tensor]:

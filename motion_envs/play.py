@@ -184,7 +184,7 @@ def _record_step(env, recorder: RolloutRecorder) -> None:
         return
     if hasattr(env, "last_frames"):  # ClopsNav: every frame of the action's chunk
         for body in env.last_frames:
-            recorder.add(body.transl, body.orient, body.pose, env.state.goal)
+            recorder.add(body.transl, body.orient, body.shown_pose, env.state.goal)
         return
     inputs = env.core.render_inputs(env.state)
     recorder.add(inputs.transl, inputs.global_orient, inputs.body_pose, inputs.goal)

@@ -260,11 +260,10 @@ def test_a_learned_prior_starts_as_n01_then_learns_from_the_condition(walking_mo
 def test_pelvis_goals_walk_waypoints_and_the_asked_pace_matters(shipped):
     """WANDR following a two-waypoint path 3 m straight ahead with pelvis goals (`baselines.wandr_waypoints`): the
     wrist goal it is handed asks for exactly the pelvis's path to the waypoint; at the shipped pace most bodies
-    walk the path and stop there, while a pace of 0.1 m/s leaves every body short of it after the same 10 s. On the
-    prior's own legs: with the foot rule 2 of the 8 slow bodies still arrived (measured, AMX Xeon)."""
+    walk the path and stop there, while a pace of 0.1 m/s leaves every body short of it after the same 10 s."""
     from baselines.wandr_waypoints import follow_waypoints, pelvis_goal_as_wrist_goal
 
-    core = WandrReachCore(WandrReachConfig(lock_feet=False), shipped)
+    core = WandrReachCore(WandrReachConfig(), shipped)
     count = 8
     rows, facing = torch.arange(count) % core.num_starts, torch.linspace(-3.0, 3.0, count)
     forward = core.starts.forward(rows, facing)

@@ -165,12 +165,24 @@ class BodyModel(nn.Module):
 
     def _compose(self, transl: torch.Tensor, root: torch.Tensor, local: torch.Tensor, batch: torch.Size) -> BodyPose:
         """Forward kinematics from transposed world-axis rotations: root (B, 3, 3), local (B, 21, 3, 3)."""
-        size = root.shape[0]
         levels = [root[:, None]]
         for start, stop, slots in self._levels:
             parents = levels[-1][:, slots] if isinstance(slots, slice) else levels[-1].index_select(1, getattr(self, slots))
             levels.append(local[:, start - 1 : stop - 1] @ parents)  # (R_p L)ᵀ = Lᵀ R_pᵀ
-        transposed = torch.cat(levels, dim=1)  # (B, 22, 3, 3): [n, j, b, a] = R_j[a, b]
+        return self._posed(transl, torch.cat(levels, dim=1), batch)
+
+    def from_world_rotations(self, transl: torch.Tensor, rotations: torch.Tensor) -> BodyPose:
+        """The body with pelvis positions (..., 3) and world joint rotations (..., 22, 3, 3) (`BodyPose.rotations`),
+        without forward kinematics: for a pose whose world rotations are known (`leg_fit.fit_leg_rotations`)."""
+        batch = transl.shape[:-1]
+        if rotations.shape != (*batch, NUM_JOINTS, 3, 3):
+            raise ValueError(f"need rotations {(*batch, NUM_JOINTS, 3, 3)}, got {tuple(rotations.shape)}")
+        size = int(np.prod(batch)) if batch else 1
+        return self._posed(transl, rotations.reshape(size, NUM_JOINTS, 3, 3).transpose(-1, -2), batch)
+
+    def _posed(self, transl: torch.Tensor, transposed: torch.Tensor, batch: torch.Size) -> BodyPose:
+        """BodyPose from transposed world rotations (B, 22, 3, 3): [n, j, b, a] = R_j[a, b]."""
+        size = transposed.shape[0]
         rows = torch.cat(  # one pass: rearrange the rotations and append the pelvis
             [transposed.reshape(size, FRAME_ROWS - 1, 3).permute(1, 0, 2), transl.reshape(1, size, 3)], dim=0
         ).reshape(FRAME_ROWS, size * 3)

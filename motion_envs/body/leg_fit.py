@@ -25,6 +25,8 @@ convention, `motion_envs.body.kinematics`; `BodyModel.from_matrices` poses them)
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import torch
 
 from motion_envs.body.kinematics import BodyModel, BodyPose
@@ -43,8 +45,11 @@ CONTACT_POINTS = (HEEL, TOE_TIP)
 
 LEG_JOINTS = tuple(joint_index(f"{side}_{part}") for side in ("left", "right") for part in ("hip", "knee", "ankle", "foot"))
 """The joints whose rotations the fit sets, left leg then right."""
-LEG_PARTS = tuple(torch.tensor(LEG_JOINTS[part::4]) for part in range(4))
-"""Hips, knees, ankles and toes: (2,) joint indices each, left and right."""
+LEG_PARTS = tuple(slice(LEG_JOINTS[part], LEG_JOINTS[part + 4] + 1) for part in range(4))
+"""Hips, knees, ankles and toes: left and right are neighbours in SMPL-X's joint order (a slice each, a view)."""
+assert all(part.stop - part.start == 2 for part in LEG_PARTS)
+LEG_POSE_ROWS = torch.tensor(LEG_JOINTS) - 1
+"""`LEG_JOINTS` as rows of a (..., 21, ...) SMPL-X body pose (which has no pelvis)."""
 
 
 def leg_fit_marker_ids() -> torch.Tensor:
@@ -134,25 +139,37 @@ def two_bone(hip: torch.Tensor, knee: torch.Tensor, ankle: torch.Tensor, target:
     return thigh, shin
 
 
-def fit_legs(body: BodyModel, posed: BodyPose, pose: torch.Tensor, current: torch.Tensor,
-             target_markers: torch.Tensor) -> torch.Tensor:  # fmt: skip
-    """`pose` with both legs fitted to the targets of their feet (module doc).
+class FittedLegs(NamedTuple):
+    """Legs fitted by `fit_legs`.
+
+    leg_pose: (..., 8, 3, 3) the `LEG_JOINTS`' SMPL-X local rotations (rows `LEG_POSE_ROWS` of a body pose).
+    posed: the fitted body (joints (..., 22, 3), rotations (..., 22, 3, 3)).
+    """
+
+    leg_pose: torch.Tensor
+    posed: BodyPose
+
+
+def fit_legs(body: BodyModel, posed: BodyPose, transl: torch.Tensor, current: torch.Tensor,
+             target_markers: torch.Tensor) -> FittedLegs:  # fmt: skip
+    """Both legs of a posed body fitted to the targets of their feet (module doc).
 
     Args:
         body: the body model that posed `posed`.
         posed: BodyPose with joints (..., 22, 3) and rotations (..., 22, 3, 3).
-        pose: (..., 21, 3, 3) the SMPL-X local rotations it was posed with.
+        transl: (..., 3) where the fitted body's pelvis goes (`posed`'s own, or it moved as a whole).
         current: (..., 2, 5, 3) `leg_fit_marker_ids` (left, right) on `posed` (the callers have skinned them).
         target_markers: (..., 2, 5, 3) where `leg_fit_marker_ids` (left, right) should be.
 
     Returns:
-        (..., 21, 3, 3) SMPL-X local rotations (`BodyModel.from_matrices`): `pose` itself off the legs (not
-        recomputed from the world rotations, whose rounding an autoregressive prior would compound), the legs'
-        made orthonormal (Gram-Schmidt) for the same reason.
+        The legs' local rotations, made orthonormal (Gram-Schmidt: rounding must not build up where a prior feeds
+        them back; the other joints' are the caller's own, not recomputed from world rotations, for the same
+        reason), and the fitted body, posed without forward kinematics: the legs' world rotations are chained from
+        those locals and the rest are `posed`'s (the legs have no other children).
     """
     joints, world = posed.joints, posed.rotations
     turn, shift = rigid_foot_motion(current, target_markers)  # (..., 2, 3, 3), (..., 2, 3)
-    hip, knee, ankle, toes = (joints[..., ids, :] for ids in LEG_PARTS)  # (..., 2, 3) each
+    hip, knee, ankle, toes = (joints[..., part, :] for part in LEG_PARTS)  # (..., 2, 3) each
     target = (turn @ ankle[..., None])[..., 0] + shift
     forward = world[..., LEG_PARTS[0], :, 1]  # the rest body faces +y, and knees bend forwards
     thigh, shin = two_bone(hip, knee, ankle, target, forward)
@@ -164,10 +181,14 @@ def fit_legs(body: BodyModel, posed: BodyPose, pose: torch.Tensor, current: torc
     toe_turn = smallest_rotation(toe_tip - toe_joint, target_markers[..., TOE_TIP, :] - toe_joint)
     toe_world = toe_turn @ turn @ world[..., LEG_PARTS[3], :, :]
     legs = torch.stack([hip_world, knee_world, ankle_world, toe_world], dim=-3)  # (..., 2, 4, 3, 3)
-    pelvis = world[..., :1, None, :, :].expand_as(hip_world[..., None, :, :])  # (..., 2, 1, 3, 3)
-    parents = torch.cat([pelvis, legs[..., :-1, :, :]], dim=-3)
-    local_world = (parents.transpose(-1, -2) @ legs).flatten(-4, -3)  # (..., 8, 3, 3) in `LEG_JOINTS` order
+    pelvis = world[..., :1, :, :]  # (..., 1, 3, 3): both hips' parent
+    parents = torch.cat([pelvis[..., None, :, :, :].expand_as(legs[..., :1, :, :]), legs[..., :-1, :, :]], dim=-3)
+    local_world = sixd_to_matrix(matrix_to_sixd(parents.transpose(-1, -2) @ legs))  # (..., 2, 4, 3, 3), orthonormal
+    chained = [pelvis]
+    for part in range(4):  # down both legs at once: hips, knees, ankles, toes
+        chained.append(chained[-1] @ local_world[..., part, :, :])
+    rotations = world.clone()
+    for part, leg_world in zip(LEG_PARTS, chained[1:]):
+        rotations[..., part, :, :] = leg_world
     axes = body.axes_to_world.to(local_world.dtype)
-    fitted = pose.clone()
-    fitted[..., torch.tensor(LEG_JOINTS, device=joints.device) - 1, :, :] = sixd_to_matrix(matrix_to_sixd(axes.T @ local_world @ axes))
-    return fitted
+    return FittedLegs(axes.T @ local_world.flatten(-4, -3) @ axes, body.from_world_rotations(transl, rotations))

@@ -185,9 +185,9 @@ class ClopsNavConfig:
     """z = latent_scale · ε, ε ~ N(0, I) every frame. The paper samples (1); we decode the prior's mean (0): with
     our small-data prior, sampling raised foot skating from 44% to 74% of frames and collisions from 23% to 32% of
     actions under random actions (64 bodies × 15 actions, `open`)."""
-    lock_feet: bool = False
-    """Hold a loaded foot where it stood, every frame (`WandrStepper`). Off by default, unlike WandrReach: the
-    prior feeds the held legs back, and the shipped DQN policies were trained without them."""
+    lock_feet: bool = True
+    """The foot rule, as WandrReach's: every frame is shown with a loaded foot held where it stood (`WandrStepper`);
+    the prior, the views and the agents' episodes are the same with and without it. False: the prior's own legs."""
     collision_every: int = 3
     """Frames between collision checks within a chunk (and its last frame)."""
     collision_tolerance: float = 0.02
@@ -504,7 +504,7 @@ class ClopsNavCore:
         return "sphere", self.config.goal_radius
 
     def render_inputs(self, state: ClopsNavState) -> RenderInputs:
-        return RenderInputs(state.transl, matrix_to_sixd(state.orient), matrix_to_sixd(state.pose), state.joints[:, PELVIS], state.goal)
+        return RenderInputs(state.transl, matrix_to_sixd(state.orient), matrix_to_sixd(state.shown_pose), state.joints[:, PELVIS], state.goal)
 
     def scene_spec(self, state: ClopsNavState) -> str:
         """The first body's room as "family:seed" (what rollouts record and `motion-envs view --scene` takes)."""
@@ -588,7 +588,7 @@ class ClopsNavEnv(gym.Env):
         scene = self.core.render_scene(self.state)
         if self._view is None or self._view_scene is not scene:
             self._view, self._view_scene = EnvView(self.core.body, *self.core.goal_marker, max_bodies=1, scene=scene), scene
-        inputs = RenderInputs(body.transl, matrix_to_sixd(body.orient), matrix_to_sixd(body.pose), body.joints[:, PELVIS], self.state.goal)
+        inputs = RenderInputs(body.transl, matrix_to_sixd(body.orient), matrix_to_sixd(body.shown_pose), body.joints[:, PELVIS], self.state.goal)
         return with_view_inset(self._view.frame(inputs, [trail]), view)
 
     def _pelvis(self) -> np.ndarray:

@@ -24,10 +24,11 @@ class DeltaPriorBodies(BatchedState):
     pose: torch.Tensor
     previous_delta: torch.Tensor
     joints: torch.Tensor
+    shown_pose: torch.Tensor
 
     @property
     def body(self) -> WandrState:
-        return WandrState(self.transl, self.orient, self.pose, self.previous_delta, self.joints)
+        return WandrState(self.transl, self.orient, self.pose, self.previous_delta, self.joints, self.shown_pose)
 
 
 class StartBodies:

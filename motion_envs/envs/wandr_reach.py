@@ -126,11 +126,11 @@ class WandrReachConfig:
     ground_feet: bool = True
     """Keep the lowest foot vertex on the floor after every frame (`WandrStepper`); off: the prior alone."""
     lock_feet: bool = True
-    """The foot rule: hold a loaded foot where it stood, every frame (`WandrStepper`). WANDR feeds its own bodies
-    back, so the held legs change its motion: the previous PPO policy, trained without the rule, fell from 89.7%
-    to 70.3% SR (mean latent, 300 grid rollouts) at WANDR's FS 45.0 -> 18.5%; the shipped one is fine-tuned
-    with it (91.0% at 20.4%). The sampler, paced: 76.3 -> 68.3% at FS 75.4 -> 40.9%. False: the prior's own
-    legs."""
+    """The foot rule: every frame is shown with a loaded foot held where it stood (`WandrStepper`,
+    `WandrState.shown_pose`); the prior goes on from its own pose, so success is the same with and without it.
+    On the 3,750-rollout grid (`bench wandr`) it takes WANDR's FS of the PPO policy's mean latent from 55.6% to
+    34.4% (SR 90.3% either way), of the 8-s sampler from 66.5% to 32.3%. (Fed back to the prior, the held legs
+    folded a 15-s walk: head over the last second 0.69 m against 1.12 m.) False: the prior's own legs."""
     weights: str | None = None
     """WANDR prior weights (default: the shipped priors/weights/wandr.pt)."""
     device: str = "cpu"
@@ -282,7 +282,7 @@ class WandrReachCore:
 
     def render_inputs(self, state: WandrReachState) -> RenderInputs:
         """The bodies now (rotations as 6-D), with their current goals."""
-        return RenderInputs(state.transl, matrix_to_sixd(state.orient), matrix_to_sixd(state.pose), state.joints[:, PELVIS], state.goal)
+        return RenderInputs(state.transl, matrix_to_sixd(state.orient), matrix_to_sixd(state.shown_pose), state.joints[:, PELVIS], state.goal)
 
     def observe(self, state: WandrReachState) -> torch.Tensor:
         """(N, 281): the normalised condition, the goal in the heading frame, frames left / max_frames."""

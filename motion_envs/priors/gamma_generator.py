@@ -60,7 +60,7 @@ import torch
 from motion_envs.batched import BatchedState
 from motion_envs.body import BodyModel
 from motion_envs.body.foot_lock import locked_feet
-from motion_envs.body.leg_fit import CONTACT_POINTS, fit_legs, leg_fit_marker_slots
+from motion_envs.body.leg_fit import CONTACT_POINTS, LEG_POSE_ROWS, fit_legs, leg_fit_marker_slots
 from motion_envs.body.markers import marker_ids
 from motion_envs.body.soles import sole_hull_vertex_ids
 from motion_envs.body.rotations import matrix_to_sixd, rotation_matrix
@@ -269,9 +269,11 @@ class GammaGenerator(torch.nn.Module):
         if lock_feet:
             track = torch.cat([seed_world["markers"][:, -1:, self.leg_fit_slots], predicted[:, :, self.leg_fit_slots]], 1)
             targets = locked_feet(track, seed_world["body_markers"][:, -1, self.leg_fit_slots], CONTACT_POINTS, GAMMA_FPS)
-            targets[..., 2] = reprojected[:, :, self.leg_fit_slots, 2]  # heights: the regressor's (module doc, 5)
-            pose = matrix_to_sixd(fit_legs(self.body, posed, rotation_matrix(pose), reprojected[:, :, self.leg_fit_slots], targets))
-            posed = self.body(transl, orient, pose)
+            regressed_feet = reprojected[:, :, self.leg_fit_slots]
+            targets[..., 2] = regressed_feet[..., 2]  # heights: the regressor's (module doc, 5)
+            fitted = fit_legs(self.body, posed, transl, regressed_feet, targets)
+            pose, posed = pose.clone(), fitted.posed
+            pose[..., LEG_POSE_ROWS.to(pose.device), :] = matrix_to_sixd(fitted.leg_pose)
             reprojected = self.body.skin_with_rows(posed, self.marker_rows)
         new = {"predicted_markers": predicted, "reprojected_markers": reprojected, "joints": posed.joints,
                "transl": transl, "global_orient": orient, "body_pose": pose}  # fmt: skip

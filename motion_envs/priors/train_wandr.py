@@ -145,7 +145,7 @@ class WandrClips:
         before = frames - 1
         delta = pose_delta(self.transl[before], self.orient[before], self.pose[before],
                            self.transl[frames], self.orient[frames], self.pose[frames])  # fmt: skip
-        return WandrState(self.transl[frames], self.orient[frames], self.pose[frames], delta, self.joints[frames])
+        return WandrState(self.transl[frames], self.orient[frames], self.pose[frames], delta, self.joints[frames], self.pose[frames])
 
     def sample_goal_frames(self, starts: torch.Tensor, steps: int, horizon: int, far_probability: float,
                            generator: torch.Generator | None = None) -> torch.Tensor:  # fmt: skip

@@ -25,13 +25,19 @@ from torch import nn
 
 from motion_envs.body import BodyModel, BodyPose
 from motion_envs.body.foot_lock import locked_feet
-from motion_envs.body.leg_fit import CONTACT_POINTS, fit_legs, leg_fit_marker_ids
+from motion_envs.body.leg_fit import CONTACT_POINTS, LEG_POSE_ROWS, FittedLegs, fit_legs, leg_fit_marker_ids
 from motion_envs.body.markers import foot_vertex_ids
 from motion_envs.priors.inference_linear import InferenceSequential
 from motion_envs.priors.wandr_features import (
     CONDITION_DIM, DELTA_DIM, FPS, INTENTIONS, WandrState, condition, integrate, intention, make_state,
 )  # fmt: skip
 
+
+WANDR_MAX_OFFSET = 0.15
+"""The farthest (m) the foot rule holds a WANDR foot from the prior's (GAMMA's: `foot_lock.MAX_OFFSET`, 5 cm).
+The shown legs are not fed back, and WANDR's bent legs rarely run out of reach: under the PPO policy's mean latent
+(750 grid rollouts) caps of 5 / 8 / 12 / 15 / 20 cm gave WANDR's FS 34.4 / 29.0 / 25.5 / 24.2 / 23.2% (no rule 55.6%)
+with 0.08 / 0.19 / 0.26 / - / 0.45% of leg solves out of reach."""
 
 PRIOR_LAYERS = 3
 """Linear layers of the learned prior's network (`WandrConfig.learned_prior`)."""
@@ -153,12 +159,15 @@ class WandrStepper:
     its lowest foot vertex touches the floor: our prior's integrated height
     drifts (see `wandr_features`), and a walking-and-reaching body always
     has a foot down. The paper's generation has no such step; set it off
-    to see the prior alone. With `lock_feet` each frame's legs are fitted
-    (`motion_envs.body.leg_fit`) so that a foot loaded in the previous frame
-    stays where it stood (`motion_envs.body.foot_lock`; the previous frame's
-    body is the prediction's start, so nothing carries over). Unlike GAMMA's
-    (whose next seed keeps the regressor's bodies), the held legs are fed
-    back to the prior. `intentions` overrides which intention parts the
+    to see the prior alone. With `lock_feet` each frame is shown with its
+    legs fitted (`motion_envs.body.leg_fit`) so that a foot loaded in the
+    previous frame stays where the shown body had it
+    (`motion_envs.body.foot_lock`): `WandrState.shown_pose`. As in GAMMA
+    (whose next seed keeps the regressor's bodies), the prior goes on from
+    its own pose: fed back, the held legs made the prior fold a 15-s walk
+    (head over the last second 0.69 m, 1.12 m without the rule; lowest head
+    -0.50 m; `bench floor`), and the rule leaves the prior's motion, and the
+    policies trained on it, as they are. `intentions` overrides which intention parts the
     prior is shown (default: those it was trained with; () shows none).
     """
 
@@ -187,23 +196,34 @@ class WandrStepper:
         return self.advance(state, delta)
 
     def advance(self, state: WandrState, delta: torch.Tensor) -> tuple[WandrState, torch.Tensor]:
-        """Bodies `state` moved by their decoded deltas (B, 135): integrated, feet held, grounded; and their foot
-        vertices (B, V, 3)."""
+        """Bodies `state` moved by their decoded deltas (B, 135): integrated, grounded, and (`lock_feet`) shown with
+        their feet held; and the shown bodies' foot vertices (B, V, 3)."""
         transl, orient, pose = integrate(state.transl, state.orient, state.pose, delta)
         following, posed = make_state(self.body, transl, orient, pose, delta)
-        if self.lock_feet:
-            before = self.body.skin_with_rows(self.body.from_matrices(state.transl, state.orient, state.pose), self.fit_rows)
-            after = self.body.skin_with_rows(posed, self.fit_rows)
-            track = torch.stack([before, after], dim=1).unflatten(-2, (2, -1))  # (B, 2 frames, 2 feet, 5, 3)
-            targets = locked_feet(track, track[:, 0], CONTACT_POINTS, FPS)[:, 0]
-            following, posed = make_state(self.body, transl, orient, fit_legs(self.body, posed, pose, track[:, 1], targets), delta)
-        return self.grounded(following, self.feet(posed))
+        following, lift = self.grounded(following, self.feet(posed))
+        if not self.lock_feet:
+            return following, self.feet(posed) + lift[:, None]
+        fitted = self.held_legs(state, posed, following.transl)
+        shown = pose.clone()
+        shown[:, LEG_POSE_ROWS.to(pose.device)] = fitted.leg_pose
+        return following._replace(shown_pose=shown), self.feet(fitted.posed)
+
+    def held_legs(self, state: WandrState, posed: BodyPose, transl: torch.Tensor) -> FittedLegs:
+        """The next frame's legs (its body `posed`, before grounding; its pelvis then at `transl`) fitted so that a
+        foot loaded at `state` stays where the shown body put it (`locked_feet` over the two frames, the shown
+        body's offset from the prior's carried in as the seed offset)."""
+        before = self.body.from_matrices(state.transl, state.orient, state.pose)
+        track = torch.stack([self.body.skin_with_rows(before, self.fit_rows),
+                             self.body.skin_with_rows(posed, self.fit_rows)], dim=1).unflatten(-2, (2, -1))  # fmt: skip
+        shown_before = self.body.from_matrices(state.transl, state.orient, state.shown_pose)
+        shown_first = self.body.skin_with_rows(shown_before, self.fit_rows).unflatten(-2, (2, -1))  # (B, 2 feet, 5, 3)
+        targets = locked_feet(track, shown_first, CONTACT_POINTS, FPS, WANDR_MAX_OFFSET)[:, 0]
+        return fit_legs(self.body, posed, transl, track[:, 1], targets)
 
     def grounded(self, state: WandrState, feet: torch.Tensor) -> tuple[WandrState, torch.Tensor]:
-        """Bodies and their foot vertices (B, V, 3) moved vertically so the lowest foot vertex is on the floor
-        (unchanged without `ground_feet`)."""
-        if not self.ground_feet:
-            return state, feet
+        """Bodies moved vertically so that the lowest of their foot vertices (B, V, 3) is on the floor (unmoved
+        without `ground_feet`), and the lift (B, 3)."""
         lift = torch.zeros_like(state.transl)
-        lift[:, 2] = -feet[..., 2].amin(dim=-1)
-        return state._replace(transl=state.transl + lift, joints=state.joints + lift[:, None]), feet + lift[:, None]
+        if self.ground_feet:
+            lift[:, 2] = -feet[..., 2].amin(dim=-1)
+        return state._replace(transl=state.transl + lift, joints=state.joints + lift[:, None]), lift

@@ -66,6 +66,9 @@ class WandrState(NamedTuple):
     transl: (B, 3) pelvis position. orient: (B, 3, 3) pelvis rotation.
     pose: (B, 21, 3, 3) local joint rotations. previous_delta: (B, 135) the delta into this frame.
     joints: (B, 22, 3) world joint positions of this pose.
+    shown_pose: (B, 21, 3, 3) the local rotations as shown: `pose` with the legs refitted by the foot rule
+    (`WandrStepper`'s `lock_feet`), `pose` itself without it. The prior sees `pose`, renders and foot metrics
+    `shown_pose`; the two differ only at the hips, knees, ankles and toes.
     """
 
     transl: torch.Tensor
@@ -73,6 +76,7 @@ class WandrState(NamedTuple):
     pose: torch.Tensor
     previous_delta: torch.Tensor
     joints: torch.Tensor
+    shown_pose: torch.Tensor
 
 
 def heading(orient: torch.Tensor) -> torch.Tensor:
@@ -144,6 +148,7 @@ def condition(state: WandrState, intention_features: torch.Tensor) -> torch.Tens
 
 def make_state(body: BodyModel, transl: torch.Tensor, orient: torch.Tensor, pose: torch.Tensor,
                previous_delta: torch.Tensor) -> tuple[WandrState, BodyPose]:  # fmt: skip
-    """A `WandrState` with its joints from forward kinematics (rotations as matrices), and the posed body."""
+    """A `WandrState` shown as it is, with its joints from forward kinematics (rotations as matrices), and the
+    posed body."""
     posed = body.from_matrices(transl, orient, pose)
-    return WandrState(transl, orient, pose, previous_delta, posed.joints), posed
+    return WandrState(transl, orient, pose, previous_delta, posed.joints, pose), posed

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 import torch
@@ -164,3 +166,19 @@ def test_a_straight_leg_has_finite_gradients():
         thigh, shin = two_bone(hip, knee, ankle, target, torch.tensor([0.0, 1.0, 0.0]))
         (thigh.sum() + shin.sum()).backward()
         assert torch.isfinite(target.grad).all(), target.grad
+
+
+def test_bench_gamma_feet_walks_the_same_bodies_with_less_skating_under_the_rule():
+    """`bench gamma-feet`'s two walks (shipped α = 1 policy, 16 bodies × 6 primitives): the rule changes the legs
+    (and, through the floor rule's lift, the heights the policy sees), not the walking: the pelvis keeps its
+    speed, and the bodies' feet slide less."""
+    from benchmarks.gamma_feet import figures, walk
+
+    core = GammaReachCore(GammaReachConfig(precision="float32"))
+    runs = {lock: walk(GammaReachCore(dataclasses.replace(core.config, lock_feet=lock), core.generator), 16, 6, 0)
+            for lock in (False, True)}  # fmt: skip
+    table = {lock: figures(run, 16, 6) for lock, run in runs.items()}
+    speeds = [table[lock]["pelvis ground speed (m/s)"] for lock in (False, True)]
+    assert abs(speeds[1] - speeds[0]) < 0.05 * speeds[0] and speeds[0] > 0.3, speeds
+    assert table[True]["FS (WANDR's)"] < table[False]["FS (WANDR's)"], table
+    assert table[True]["contact-aware FS"] < table[False]["contact-aware FS"], table

@@ -2,7 +2,8 @@
 
 For batches of 64 to 4,096 bodies: seconds per primitive (one
 `GammaReachCore.step`: both predictors, body regression, skinning, blending,
-markers and the reward) and body-primitives per second, in fp32 and with the
+the floor and foot rules, markers and the reward; at 1,024 bodies also without
+the foot rule) and body-primitives per second, in fp32 and with the
 prior's networks in bf16 (`GammaGenerator.set_precision`). Beside them: the
 FLOPs of one body-primitive (counted by `torch.utils.flop_counter`), this
 machine's own matmul FLOP/s in fp32 and bf16 (measured in the same run), and
@@ -14,6 +15,7 @@ section of `benchmarks/results/throughput.md`.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable
@@ -98,6 +100,14 @@ def main(batches: tuple[int, ...] = (64, 128, 256, 512, 1024, 4096), bf16_batche
             seconds = best_seconds(lambda: core.step(state, z), 5 if count <= 1024 else 1)
             rows.append((precision, count, seconds, count / seconds))
             print(f"{precision} {count}: {seconds:.3f} s per primitive, {count / seconds:,.0f} body-primitives/s")
+    rule_free = GammaReachCore(dataclasses.replace(core.config, lock_feet=False), generator)
+    for precision in ("float32", "bfloat16"):  # the foot rule's cost at 1,024 bodies
+        generator.set_precision(precision)
+        state = walking_state(rule_free, 1024)
+        z = torch.randn(1024, generator.latent_size, generator=torch.Generator().manual_seed(0))
+        seconds = best_seconds(lambda: rule_free.step(state, z), 5)
+        rows.append((f"{precision}, no foot rule", 1024, seconds, 1024 / seconds))
+        print(f"{precision} 1024 without the foot rule: {seconds:.3f} s per primitive")
     generator.set_precision("float32")
     env_rows = []
     for count in env_batches:
@@ -116,13 +126,14 @@ def main(batches: tuple[int, ...] = (64, 128, 256, 512, 1024, 4096), bf16_batche
         env_rows.append((count, raw, wrapped))
         print(f"env {count}: raw {raw:.3f} s, SB3 adapter {wrapped:.3f} s ({wrapped / raw - 1:+.0%})")
     chosen = resolve_precision("auto")
-    at_1024 = {precision: rate for precision, count, _, rate in rows if count == 1024}
+    at_1024 = {precision: rate for precision, count, _, rate in rows if count == 1024}  # the rule-free rows named apart
     verdicts = [f"{name} {at_1024[name]:,.0f} (target ≥ {target:,})" for name, target in TARGETS.items()
                 if name in at_1024 and (name == "float32" or native_bf16())]  # fmt: skip
     lines = [
         SECTION, "",
         "One primitive (10 frames at 40 fps, 8 new) for every body: both marker predictors, body regression and skinning of the 8 new "
-        "frames, blending, markers and the reward (`GammaReachCore.step`), best of 5. The paper's Table S3: "
+        "frames, blending, the envs' floor and foot rules (`ground_feet`, `lock_feet`: the defaults), markers and the reward "
+        "(`GammaReachCore.step`), best of 5; the last rows without the foot rule. The paper's Table S3: "
         f"{PAPER_SECONDS_1024} s per primitive for 1,024 bodies on a Quadro RTX 6000 GPU ≈ "
         f"{1024 / PAPER_SECONDS_1024:,.0f} body-primitives/s. One body-primitive costs {per_body / 1e6:.1f} MFLOP "
         f"(torch's FLOP counter). This machine's matmul (1024², same run, through oneDNN as the priors' layers): "
@@ -134,11 +145,11 @@ def main(batches: tuple[int, ...] = (64, 128, 256, 512, 1024, 4096), bf16_batche
         "|---|---|---|---|---|---|",
     ]  # fmt: skip
     for precision, count, seconds, rate in rows:
-        share = rate * per_body / flops["fp32" if precision == "float32" else "bf16"]
+        share = rate * per_body / flops["fp32" if precision.startswith("float32") else "bf16"]
         shown = f"{share:.0%}" if share <= 1 else "– (see below the table)"
         lines.append(f"| {precision} | {count:,} | {seconds:.3f} | {rate:,.0f} | {rate / (1024 / PAPER_SECONDS_1024):.2f}× "
                      f"| {shown} |")  # fmt: skip
-    if any(rate * per_body > flops["fp32" if precision == "float32" else "bf16"] for precision, _, _, rate in rows):
+    if any(rate * per_body > flops["fp32" if precision.startswith("float32") else "bf16"] for precision, _, _, rate in rows):
         lines += ["", "Shares over 100% are not shown: the square matmul measured slower in this run than the networks' "
                   "own layers ran (the reference is the best of 3 short timings and varies between runs on a shared "
                   "machine), so it is no ceiling for them here."]  # fmt: skip

@@ -51,13 +51,6 @@ def foot_skating(feet: torch.Tensor, threshold: float = WANDR_SKATING_THRESHOLD)
     return (then - now).norm(dim=-1).squeeze(-1) > threshold
 
 
-def marker_speeds(markers: torch.Tensor, fps: float, central: bool = False) -> torch.Tensor:
-    """(N, T, M, 3) -> marker speeds (m/s): (N, T - 1, M) forward or (N, T - 2, M) central differences."""
-    if central:
-        return (markers[:, 2:] - markers[:, :-2]).norm(dim=-1) * fps / 2.0
-    return (markers[:, 1:] - markers[:, :-1]).norm(dim=-1) * fps
-
-
 CONTACT_HEIGHT = 0.05
 CONTACT_SPEED = 0.075
 """GAMMA Eq. 11 thresholds: 5 cm above the ground, 7.5 cm/s."""
@@ -76,9 +69,20 @@ def contact_score(markers: torch.Tensor, fps: float) -> torch.Tensor:
     Returns:
         (N,) scores in (0, 1], higher is better.
     """
-    lowest = markers[..., 2].abs().amin(dim=(1, 2))
-    slowest = marker_speeds(markers, fps).amin(dim=(1, 2))
+    return contact_score_of(markers[..., 2].abs().amin(dim=(1, 2)), slowest_marker_speed(markers, fps))
+
+
+def contact_score_of(lowest: torch.Tensor, slowest: torch.Tensor) -> torch.Tensor:
+    """`contact_score` from its two minima (N,): the lowest |marker height| and the slowest marker speed (forward
+    differences), for a caller that has them."""
     return torch.exp(-(lowest - CONTACT_HEIGHT).clamp_min(0.0)) * torch.exp(-(slowest - CONTACT_SPEED).clamp_min(0.0))
+
+
+def slowest_marker_speed(markers: torch.Tensor, fps: float, central: bool = False) -> torch.Tensor:
+    """(N, T, M, 3) -> (N,) the slowest marker speed (m/s) of each primitive, over its frames and markers, by
+    forward or central differences (the square root taken of the minimum only)."""
+    step = markers[:, 2:] - markers[:, :-2] if central else markers[:, 1:] - markers[:, :-1]
+    return (step * step).sum(-1).amin(dim=(1, 2)).sqrt() * (fps / 2.0 if central else fps)
 
 
 LOADED_HEIGHT = 0.025

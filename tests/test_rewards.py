@@ -7,7 +7,7 @@ import math
 import pytest
 import torch
 
-from motion_envs.metrics import contact_score, marker_speeds, window_speeds
+from motion_envs.metrics import contact_score, slowest_marker_speed, window_speeds
 from motion_envs.body.canonical_frame import LEFT_HIP, PELVIS, RIGHT_HIP
 from motion_envs.rewards import (
     RewardConfig,
@@ -74,11 +74,13 @@ def test_reward_configs():
         RewardConfig.named("fast")
 
 
-def test_marker_speeds_and_contact_score():
-    markers = torch.zeros(2, 3, 1, 3)
+def test_slowest_marker_speed_and_contact_score():
+    markers = torch.zeros(2, 3, 2, 3)
     markers[:, :, 0, 0] = torch.tensor([0.0, 0.01, 0.03])  # 0.4 m/s then 0.8 m/s at 40 fps
-    assert torch.allclose(marker_speeds(markers, 40.0)[0, :, 0], torch.tensor([0.4, 0.8]))
-    assert torch.allclose(marker_speeds(markers, 40.0, central=True)[0, :, 0], torch.tensor([0.6]))
+    markers[:, :, 1, 1] = torch.tensor([0.0, 0.02, 0.04])  # 0.8 m/s throughout
+    assert torch.allclose(slowest_marker_speed(markers, 40.0), torch.tensor([0.4, 0.4]))
+    assert torch.allclose(slowest_marker_speed(markers, 40.0, central=True), torch.tensor([0.6, 0.6]))
+    markers = markers[:, :, :1].clone()
     markers[1, :, 0, 0] = 0.0  # a still marker on the ground: perfect contact
     markers[0, :, 0, 2] = 0.15  # 10 cm above the threshold height
     expected = math.exp(-0.10) * math.exp(-(0.4 - 0.075))

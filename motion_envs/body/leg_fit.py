@@ -31,7 +31,6 @@ import torch
 
 from motion_envs.body.kinematics import BodyModel, BodyPose
 from motion_envs.body.markers import MARKER_NAMES, marker_ids
-from motion_envs.body.rotations import matrix_to_sixd, sixd_to_matrix
 from motion_envs.body.skeleton import PARENTS, joint_index
 
 FOOT_FIT_MARKERS: dict[str, tuple[str, ...]] = {
@@ -162,10 +161,11 @@ def fit_legs(body: BodyModel, posed: BodyPose, transl: torch.Tensor, current: to
         target_markers: (..., 2, 5, 3) where `leg_fit_marker_ids` (left, right) should be.
 
     Returns:
-        The legs' local rotations, made orthonormal (Gram-Schmidt: rounding must not build up where a prior feeds
-        them back; the other joints' are the caller's own, not recomputed from world rotations, for the same
-        reason), and the fitted body, posed without forward kinematics: the legs' world rotations are chained from
-        those locals and the rest are `posed`'s (the legs have no other children).
+        The legs' local rotations and the fitted body, posed without forward kinematics: the legs' world
+        rotations are the fit's and the rest are `posed`'s (the legs have no other children). Products of
+        rotations, orthonormal to rounding, and nothing feeds them back to a prior (WANDR shows its fitted legs and
+        goes on from its own; GAMMA's next primitive regresses its bodies afresh), so rounding does not build up
+        (it did when WANDR fed fitted legs back: wrists 10^9 long within 200 frames).
     """
     joints, world = posed.joints, posed.rotations
     turn, shift = rigid_foot_motion(current, target_markers)  # (..., 2, 3, 3), (..., 2, 3)
@@ -180,15 +180,13 @@ def fit_legs(body: BodyModel, posed: BodyPose, transl: torch.Tensor, current: to
     toe_tip = (turn @ current[..., TOE_TIP, :, None])[..., 0] + shift
     toe_turn = smallest_rotation(toe_tip - toe_joint, target_markers[..., TOE_TIP, :] - toe_joint)
     toe_world = toe_turn @ turn @ world[..., LEG_PARTS[3], :, :]
-    legs = torch.stack([hip_world, knee_world, ankle_world, toe_world], dim=-3)  # (..., 2, 4, 3, 3)
-    pelvis = world[..., :1, :, :]  # (..., 1, 3, 3): both hips' parent
-    parents = torch.cat([pelvis[..., None, :, :, :].expand_as(legs[..., :1, :, :]), legs[..., :-1, :, :]], dim=-3)
-    local_world = sixd_to_matrix(matrix_to_sixd(parents.transpose(-1, -2) @ legs))  # (..., 2, 4, 3, 3), orthonormal
-    chained = [pelvis]
-    for part in range(4):  # down both legs at once: hips, knees, ankles, toes
-        chained.append(chained[-1] @ local_world[..., part, :, :])
+    legs = (hip_world, knee_world, ankle_world, toe_world)  # (..., 2, 3, 3) each
     rotations = world.clone()
-    for part, leg_world in zip(LEG_PARTS, chained[1:]):
+    for part, leg_world in zip(LEG_PARTS, legs):
         rotations[..., part, :, :] = leg_world
+    stacked = torch.stack(legs, dim=-3)  # (..., 2, 4, 3, 3)
+    pelvis = world[..., :1, None, :, :].expand_as(stacked[..., :1, :, :])  # both hips' parent
+    parents = torch.cat([pelvis, stacked[..., :-1, :, :]], dim=-3)
+    local_world = (parents.transpose(-1, -2) @ stacked).flatten(-4, -3)  # (..., 8, 3, 3) in `LEG_JOINTS` order
     axes = body.axes_to_world.to(local_world.dtype)
-    return FittedLegs(axes.T @ local_world.flatten(-4, -3) @ axes, body.from_world_rotations(transl, rotations))
+    return FittedLegs(axes.T @ local_world @ axes, body.from_world_rotations(transl, rotations))

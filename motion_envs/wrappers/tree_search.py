@@ -56,7 +56,7 @@ import gymnasium as gym
 import torch
 
 from motion_envs.batched import BatchedState
-from motion_envs.metrics import marker_speeds
+from motion_envs.metrics import slowest_marker_speed
 from motion_envs.rewards import orientation_reward
 
 Proposal = Callable[[Any, BatchedState], torch.Tensor]
@@ -96,7 +96,7 @@ class SearchCost:
         """(N,) cost of the primitives just generated from `state`."""
         markers = result.primitive.markers
         lowest = markers[..., 2].amin(dim=(1, 2)).abs()
-        slowest = marker_speeds(markers, self.fps).amin(dim=(1, 2))
+        slowest = slowest_marker_speed(markers, self.fps)
         misaligned = 2.0 * (1.0 - orientation_reward(result.primitive.joints[:, -1], state.goal))  # 1 - cos
         cost = (self.ground * (lowest - self.ground_tolerance).clamp_min(0.0)
                 + self.skate * (slowest - self.skate_tolerance).clamp_min(0.0)

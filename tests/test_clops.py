@@ -82,6 +82,25 @@ def test_the_prior_moves_the_head_towards_a_target_half_a_metre_ahead(core):
     assert distance.median() < 0.25, f"median head-to-target distance {distance.median():.2f} m after 1.5 s (from 0.5 m)"
 
 
+def test_the_foot_rule_changes_only_the_shown_legs_and_their_skating(core):
+    """ClopsNav's foot rule (`lock_feet`, the default) is shown, not fed back: the same actions give the same
+    bodies, heads and episodes with and without it, and the shown feet slide in fewer frames (16 bodies, 4
+    random actions)."""
+    runs = {}
+    for lock in (True, False):
+        env = ClopsNavCore(dataclasses.replace(core.config, lock_feet=lock), prior=core.prior)
+        state = env.sample_initial_state([np.random.default_rng(seed) for seed in range(16)])
+        actions = np.random.default_rng(0).integers(env.num_actions, size=(4, 16))
+        for step in actions:
+            state, _ = env.step(state, torch.as_tensor(step))
+        runs[lock] = state
+    with_rule, without = runs[True], runs[False]
+    assert torch.allclose(with_rule.joints, without.joints, atol=1e-4)
+    assert torch.equal(with_rule.frame, without.frame) and torch.equal(with_rule.found, without.found)
+    assert not torch.allclose(with_rule.shown_pose, with_rule.pose, atol=1e-3)  # the legs were fitted
+    assert with_rule.skated.sum() < 0.8 * without.skated.sum(), (with_rule.skated.sum(), without.skated.sum())  # 242 vs 561
+
+
 def test_spaces_and_check_env():
     env = gym.make(ENV_ID, scene_seeds=SEEDS)
     check_env(env.unwrapped, skip_render_check=True)

@@ -163,7 +163,8 @@ def goal_absorbing_reward(succeeded: torch.Tensor, remaining_steps: torch.Tensor
 class WandrRewardConfig:
     """Scales of WandrReach's reward terms (ours: the WANDR paper trains no policy and has no reward).
 
-    r = progress · wrist_progress + success · reached − skating · skated − speeding · overspeed − latent · latent_cost
+    r = progress · wrist_progress + success · reached − skating · skated − speeding · overspeed − lying · pelvis_drop
+        − latent · latent_cost
     """
 
     progress: float = 10.0
@@ -177,6 +178,11 @@ class WandrRewardConfig:
     Ours: without it the policy reached far goals by running (median peak pelvis speed 3.8 m/s for goals 5–6 m
     away), because discounting pays arriving sooner; the task is walking and reaching."""
     walk_speed: float = DATA_WALK_SPEED
+    lying: float = 0.0
+    """Per frame, times the metres by which the pelvis is lower than `pelvis_floor` (`pelvis_drop`). Ours: a
+    policy without it folds flat to put the wrist on a goal at the floor (pelvis down to 0.1 m, `bench floor`)
+    where a person squats."""
+    pelvis_floor: float = 0.3
     latent: float = 0.01
     """Times the mean square of z: keeps actions where the prior was trained (N(0, I))."""
 
@@ -195,6 +201,11 @@ def overspeed(previous_pelvis: torch.Tensor, pelvis: torch.Tensor, fps: float, l
     """(...) m/s by which the pelvis moved over the ground faster than `limit` this frame (0 when slower);
     previous_pelvis, pelvis: (..., 3) positions one frame (1 / fps s) apart."""
     return ((pelvis - previous_pelvis)[..., :2].norm(dim=-1) * fps - limit).clamp_min(0.0)
+
+
+def pelvis_drop(pelvis: torch.Tensor, height: float) -> torch.Tensor:
+    """(...) metres by which pelvis positions (..., 3) are lower than `height` above the ground (0 when higher)."""
+    return (height - pelvis[..., 2]).clamp_min(0.0)
 
 
 def head_drop(joints: torch.Tensor, height: float) -> torch.Tensor:

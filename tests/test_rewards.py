@@ -130,3 +130,10 @@ def test_window_speeds_over_half_seconds_inside_each_track():
     assert inside[0].all() and inside[1].sum() == 6
     empty, none = window_speeds(torch.zeros(1, 10, 2), torch.tensor([9]), fps=30)
     assert empty.shape == none.shape == (1, 0)
+
+
+def test_pelvis_drop_counts_only_the_metres_below_the_floor_height():
+    from motion_envs.rewards import pelvis_drop
+
+    pelvis = torch.tensor([[0.0, 0.0, 0.9], [1.0, 2.0, 0.3], [0.0, 0.0, 0.1]])
+    assert torch.allclose(pelvis_drop(pelvis, 0.3), torch.tensor([0.0, 0.0, 0.2]))

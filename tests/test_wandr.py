@@ -113,7 +113,7 @@ def test_env_spaces_check_env_and_bad_input(shipped):
     with pytest.raises(TypeError, match="unknown arguments"):
         gym.make(ENV_ID, prior=shipped, goal_radius=0.2)
     _, reward, _, _, info = env.step(np.zeros(64, dtype=np.float32))
-    assert set(info["reward_terms"]) == {"progress", "success", "skating", "speeding", "latent"} and np.isfinite(reward)
+    assert set(info["reward_terms"]) == {"progress", "success", "skating", "speeding", "lying", "latent"} and np.isfinite(reward)
 
 
 def test_vector_env_matches_single_envs(shipped):

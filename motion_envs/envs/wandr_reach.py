@@ -43,6 +43,8 @@ training statistics (so they are O(1)); the last four are raw.
 vertex slides more than WANDR's 0.66 cm FS threshold), `speeding`
 (−1 per frame and m/s by which the pelvis moves over the ground faster than
 2.1 m/s, the data's fastest walk: ours, against running to far goals),
+`lying` (per frame and metre by which the pelvis is lower than 0.3 m;
+weight 0 by default: ours, against folding flat to reach the floor),
 `latent` (−0.01 · mean z²).
 
 ## Starting State
@@ -103,7 +105,7 @@ from motion_envs.priors.train_wandr import load_wandr
 from motion_envs.priors.wandr import WandrPrior, WandrStepper
 from motion_envs.priors.wandr_features import FPS, PELVIS, RIGHT_WRIST, WandrState, heading
 from motion_envs.render.env_view import EnvView, RenderInputs
-from motion_envs.rewards import WandrRewardConfig, latent_cost, overspeed, wrist_progress
+from motion_envs.rewards import WandrRewardConfig, latent_cost, overspeed, pelvis_drop, wrist_progress
 
 OBSERVATION_SIZE = 281
 RESET_OPTIONS = ("goal", "goal_time", "goals", "goal_velocity", "start_index", "facing")
@@ -297,7 +299,7 @@ class WandrReachCore:
         """`frames_per_step` frames per body from latents z (N, 64), scored."""
         config, scales = self.config, self.config.reward
         z = z.to(self.device, torch.float32).clamp(-config.latent_bound, config.latent_bound)
-        terms = {name: torch.zeros(state.num_bodies, device=self.device) for name in ("progress", "success", "skating", "speeding")}
+        terms = {name: torch.zeros(state.num_bodies, device=self.device) for name in ("progress", "success", "skating", "speeding", "lying")}
         rows = torch.arange(state.num_bodies, device=self.device)
         for _ in range(config.frames_per_step):  # WANDR is autoregressive: frame by frame
             active = ~state.reached if config.terminate_on_success else torch.ones_like(state.reached)
@@ -316,6 +318,8 @@ class WandrReachCore:
             terms["skating"] += skated.float()
             speeding = overspeed(state.joints[:, PELVIS], body.joints[:, PELVIS], FPS, scales.walk_speed)
             terms["speeding"] += torch.where(active, speeding, torch.zeros_like(speeding))
+            lying = pelvis_drop(body.joints[:, PELVIS], scales.pelvis_floor)
+            terms["lying"] += torch.where(active, lying, torch.zeros_like(lying))
             distance_now = (body.joints[:, RIGHT_WRIST] - goals[rows, goal_index]).norm(dim=-1)
             moved = WandrState(*(where_bodies(active, new, old) for new, old in zip(body, state.body)))  # done bodies stay
             state = dataclasses.replace(
@@ -330,7 +334,7 @@ class WandrReachCore:
         terms["latent"] = latent_cost(z)
         reward = (scales.progress * terms["progress"] + scales.success * terms["success"]
                   - scales.skating * terms["skating"] - scales.speeding * terms["speeding"]
-                  - scales.latent * terms["latent"])  # fmt: skip
+                  - scales.lying * terms["lying"] - scales.latent * terms["latent"])  # fmt: skip
         terminated = state.reached if config.terminate_on_success else torch.zeros_like(state.reached)
         truncated = (state.frame >= config.max_frames) & ~terminated
         return state, WandrStepResult(reward, terms, terminated, truncated)

@@ -56,7 +56,7 @@ CONTACT_SPEED = 0.075
 """GAMMA Eq. 11 thresholds: 5 cm above the ground, 7.5 cm/s."""
 
 
-def contact_score(markers: torch.Tensor, fps: float) -> torch.Tensor:
+def contact_score(markers: torch.Tensor, fps: float, slowest: torch.Tensor | None = None) -> torch.Tensor:
     """GAMMA's contact score (Eq. 11) of each primitive.
 
     s = exp(-(min |Y_z| - 0.05)+) · exp(-(min |Y_vel| - 0.075)+), minima over
@@ -65,16 +65,13 @@ def contact_score(markers: torch.Tensor, fps: float) -> torch.Tensor:
     Args:
         markers: (N, T, M, 3) markers of N primitives, ground at z = 0.
         fps: frame rate of the markers.
+        slowest: (N,) `slowest_marker_speed(markers, fps)` where the caller has it already.
 
     Returns:
         (N,) scores in (0, 1], higher is better.
     """
-    return contact_score_of(markers[..., 2].abs().amin(dim=(1, 2)), slowest_marker_speed(markers, fps))
-
-
-def contact_score_of(lowest: torch.Tensor, slowest: torch.Tensor) -> torch.Tensor:
-    """`contact_score` from its two minima (N,): the lowest |marker height| and the slowest marker speed (forward
-    differences), for a caller that has them."""
+    lowest = markers[..., 2].abs().amin(dim=(1, 2))
+    slowest = slowest_marker_speed(markers, fps) if slowest is None else slowest
     return torch.exp(-(lowest - CONTACT_HEIGHT).clamp_min(0.0)) * torch.exp(-(slowest - CONTACT_SPEED).clamp_min(0.0))
 
 

@@ -173,7 +173,7 @@ class BodyModel(nn.Module):
 
     def from_world_rotations(self, transl: torch.Tensor, rotations: torch.Tensor) -> BodyPose:
         """The body with pelvis positions (..., 3) and world joint rotations (..., 22, 3, 3) (`BodyPose.rotations`),
-        without forward kinematics: for a pose whose world rotations are known (`leg_fit.fit_leg_rotations`)."""
+        without forward kinematics: for a pose whose world rotations are known (`leg_fit.fit_legs`)."""
         batch = transl.shape[:-1]
         if rotations.shape != (*batch, NUM_JOINTS, 3, 3):
             raise ValueError(f"need rotations {(*batch, NUM_JOINTS, 3, 3)}, got {tuple(rotations.shape)}")

@@ -99,7 +99,7 @@ from motion_envs.data.primitives import GAMMA_FPS
 from motion_envs.data.start_poses import load_start_poses
 from motion_envs.envs.core import CoreVectorEnv, check_actions, config_from_kwargs
 from motion_envs.envs.options import check_known, index, number, point
-from motion_envs.metrics import contact_score_of, loaded_slide, slowest_marker_speed
+from motion_envs.metrics import contact_score, loaded_slide, slowest_marker_speed
 from motion_envs.precision import PRECISIONS, resolve_precision
 from motion_envs.body.canonical_frame import PELVIS, goal_observation
 from motion_envs.body.markers import MARKER_NAMES
@@ -329,7 +329,7 @@ class GammaReachCore:
         reward = (reward + weights.goal * terms["goal_settlement"] + terms["goal_absorbing"]
                   + config.stooping * terms["stooping"] + config.skating * terms["skating"])  # fmt: skip
         result = GammaStepResult(reward, terms, distance, reached, terminated, truncated,
-                                 contact_score_of(primitive.markers[..., 2].abs().amin(dim=(1, 2)), forward_slowest), primitive)  # fmt: skip
+                                 contact_score(primitive.markers, GAMMA_FPS, forward_slowest), primitive)  # fmt: skip
         return GammaReachState(next_seed, goal, steps, closest, paid), result
 
 

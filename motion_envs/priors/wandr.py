@@ -200,9 +200,10 @@ class WandrStepper:
         their feet held; and the shown bodies' foot vertices (B, V, 3)."""
         transl, orient, pose = integrate(state.transl, state.orient, state.pose, delta)
         following, posed = make_state(self.body, transl, orient, pose, delta)
-        following, lift = self.grounded(following, self.feet(posed))
+        feet = self.feet(posed)
+        following, lift = self.grounded(following, feet)
         if not self.lock_feet:
-            return following, self.feet(posed) + lift[:, None]
+            return following, feet + lift[:, None]
         fitted = self.held_legs(state, posed, following.transl)
         shown = pose.clone()
         shown[:, LEG_POSE_ROWS.to(pose.device)] = fitted.leg_pose
@@ -212,11 +213,10 @@ class WandrStepper:
         """The next frame's legs (its body `posed`, before grounding; its pelvis then at `transl`) fitted so that a
         foot loaded at `state` stays where the shown body put it (`locked_feet` over the two frames, the shown
         body's offset from the prior's carried in as the seed offset)."""
-        before = self.body.from_matrices(state.transl, state.orient, state.pose)
-        track = torch.stack([self.body.skin_with_rows(before, self.fit_rows),
-                             self.body.skin_with_rows(posed, self.fit_rows)], dim=1).unflatten(-2, (2, -1))  # fmt: skip
-        shown_before = self.body.from_matrices(state.transl, state.orient, state.shown_pose)
-        shown_first = self.body.skin_with_rows(shown_before, self.fit_rows).unflatten(-2, (2, -1))  # (B, 2 feet, 5, 3)
+        both = (torch.stack([value, value]) for value in (state.transl, state.orient))  # the prior's body and the shown one
+        before = self.body.from_matrices(*both, torch.stack([state.pose, state.shown_pose]))  # one batch (2, B)
+        prior_first, shown_first = self.body.skin_with_rows(before, self.fit_rows).unflatten(-2, (2, -1))  # (B, 2 feet, 5, 3)
+        track = torch.stack([prior_first, self.body.skin_with_rows(posed, self.fit_rows).unflatten(-2, (2, -1))], dim=1)
         targets = locked_feet(track, shown_first, CONTACT_POINTS, FPS, WANDR_MAX_OFFSET)[:, 0]
         return fit_legs(self.body, posed, transl, track[:, 1], targets)
 

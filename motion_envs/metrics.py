@@ -79,7 +79,7 @@ def slowest_marker_speed(markers: torch.Tensor, fps: float, central: bool = Fals
     """(N, T, M, 3) -> (N,) the slowest marker speed (m/s) of each primitive, over its frames and markers, by
     forward or central differences (the square root taken of the minimum only)."""
     step = markers[:, 2:] - markers[:, :-2] if central else markers[:, 1:] - markers[:, :-1]
-    return (step * step).sum(-1).amin(dim=(1, 2)).sqrt() * (fps / 2.0 if central else fps)
+    return step.square_().sum(-1).amin(dim=(1, 2)).sqrt() * (fps / 2.0 if central else fps)  # in place: step is new
 
 
 LOADED_HEIGHT = 0.025

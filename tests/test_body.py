@@ -20,6 +20,7 @@ from motion_envs.body.markers import (
     place_all,
 )
 from motion_envs.body.rotations import matrix_to_sixd
+from motion_envs.body.skeleton import PARENTS
 
 
 def _random_pose(generator: torch.Generator, n: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -80,6 +81,20 @@ def test_six_d_rotations_give_the_same_pose(body, generator):
     axis_angle = body(transl, orient, pose)
     sixd = body(transl, matrix_to_sixd(roma.rotvec_to_rotmat(orient)), matrix_to_sixd(roma.rotvec_to_rotmat(pose)))
     assert torch.allclose(axis_angle.joints, sixd.joints, atol=1e-5)
+
+
+def test_rotation_matrices_give_the_same_pose_and_local_rotations_come_back(body, generator):
+    """`from_matrices` (the axes map applied by a gather) poses what `forward` poses from axis-angle, and
+    `smplx_local` takes the posed world rotations' parent-relative products back to the SMPL-X rotations."""
+    transl, orient, pose = (t.float() for t in _random_pose(generator, 64))
+    reference = body(transl, orient, pose)
+    matrices = roma.rotvec_to_rotmat(pose)
+    posed = body.from_matrices(transl, roma.rotvec_to_rotmat(orient), matrices)
+    assert torch.allclose(posed.joints, reference.joints, atol=1e-5)
+    assert torch.allclose(posed.rotations, reference.rotations, atol=1e-5)
+    parents = torch.tensor(PARENTS[1:])
+    local_world = posed.rotations[:, parents].transpose(-1, -2) @ posed.rotations[:, 1:]
+    assert torch.allclose(body.smplx_local(local_world), matrices, atol=1e-5)
 
 
 def test_rest_body_stands_upright_facing_plus_y(body):

@@ -64,7 +64,7 @@ def leg_fit_marker_slots() -> torch.Tensor:
 def smallest_rotation(source: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
     """(..., 3) directions -> (..., 3, 3) the smallest rotation turning `source`'s direction onto `target`'s.
     R = I + [w]x + [w]x² / (1 + c) with w = u x v, c = u . v of the unit vectors; exact for any pair that is not
-    opposite (the legs' corrections are a few degrees)."""
+    opposite (the legs' corrections are a few degrees). [w]x² = w wᵀ - |w|² I, an outer product, not a matmul."""
     u = torch.nn.functional.normalize(source, dim=-1)
     v = torch.nn.functional.normalize(target, dim=-1)
     w = torch.linalg.cross(u, v)
@@ -72,8 +72,10 @@ def smallest_rotation(source: torch.Tensor, target: torch.Tensor) -> torch.Tenso
     zero = torch.zeros_like(c)
     skew = torch.stack([zero, -w[..., 2], w[..., 1], w[..., 2], zero, -w[..., 0], -w[..., 1], w[..., 0], zero], -1)
     skew = skew.unflatten(-1, (3, 3))
+    scale = 1.0 / (1.0 + c).clamp_min(1e-6)  # (...)
     eye = torch.eye(3, dtype=source.dtype, device=source.device)
-    return eye + skew + skew @ skew / (1.0 + c).clamp_min(1e-6)[..., None, None]
+    outer = w[..., :, None] * (w * scale[..., None])[..., None, :]
+    return outer + skew + eye * (1.0 - (w * w).sum(-1) * scale)[..., None, None]
 
 
 def foot_frame(points: torch.Tensor) -> torch.Tensor:
@@ -188,5 +190,4 @@ def fit_legs(body: BodyModel, posed: BodyPose, transl: torch.Tensor, current: to
     pelvis = world[..., :1, None, :, :].expand_as(stacked[..., :1, :, :])  # both hips' parent
     parents = torch.cat([pelvis, stacked[..., :-1, :, :]], dim=-3)
     local_world = (parents.transpose(-1, -2) @ stacked).flatten(-4, -3)  # (..., 8, 3, 3) in `LEG_JOINTS` order
-    axes = body.axes_to_world.to(local_world.dtype)
-    return FittedLegs(axes.T @ local_world @ axes, body.from_world_rotations(transl, rotations))
+    return FittedLegs(body.smplx_local(local_world), body.from_world_rotations(transl, rotations))

@@ -86,7 +86,7 @@ class GammaSeed(BatchedState):
         primitive. With 1 only frame index 1 counts (index 0 holds a copy).
     markers: (N, 2, 67, 3) what the predictor is seeded with (the blend, step 4).
     body_markers: (N, 2, 67, 3) the same markers skinned on the bodies. joints: (N, 2, 22, 3). transl: (N, 2, 3) pelvis.
-    global_orient: (N, 2, 6) and body_pose: (N, 2, 21, 6), 6-D rotations.
+    global_orient: (N, 2, 6) and body_pose: (N, 2, 21, 6), 6-D rotations (orthonormal columns).
     """
 
     seed_frames: torch.Tensor
@@ -106,7 +106,8 @@ class Primitive:
     reprojected_markers: same, skinned on the bodies (with `lock_feet`, the bodies after foot locking; otherwise
     GAMMA's re-projection, whose blend with the prediction `markers` is). Seed frames (`~new_frames()`) hold the
     seed's blended markers in the first two and its bodies' in the third. joints: (N, 10, 22, 3).
-    transl: (N, 10, 3). global_orient: (N, 10, 6). body_pose: (N, 10, 21, 6). seed_frames: (N,).
+    transl: (N, 10, 3). global_orient: (N, 10, 6). body_pose: (N, 10, 21, 6), orthonormal 6-D rotations.
+    seed_frames: (N,).
     """
 
     markers: torch.Tensor
@@ -166,10 +167,10 @@ class GammaGenerator(torch.nn.Module):
         return self._copies[key]
 
     def pose_latent(self, body_pose: torch.Tensor) -> torch.Tensor:
-        """(..., 21, 6) poses -> (..., latent) the pose VAE's mean (the pose-prior reward's input), in fp32; the
-        6-D rotations are made orthonormal in fp32 (CPU elementwise passes are faster there than in bf16)."""
-        sixd = matrix_to_sixd(rotation_matrix(body_pose)).to(PRECISIONS[self.precision])
-        return self._network("pose_vae").encode_sixd(sixd)[0].float()
+        """(..., 21, 6) orthonormal 6-D poses (a `Primitive`'s or `GammaSeed`'s body_pose; the regressor's own
+        output is not orthonormal, `rotation_matrix` makes it so) -> (..., latent) the pose VAE's mean (the
+        pose-prior reward's input), in fp32."""
+        return self._network("pose_vae").encode_sixd(body_pose.to(PRECISIONS[self.precision]))[0].float()
 
     @classmethod
     def load(cls, weights_dir: str | Path = WEIGHTS_DIR) -> GammaGenerator:
@@ -258,9 +259,10 @@ class GammaGenerator(torch.nn.Module):
         regressed = {name: value.float() for name, value in self._network("regressor")(future).items()}
         future = future.float()  # canonical coordinates
         transl = to_world(regressed["transl"], frame)
-        orient = matrix_to_sixd(frame.rotation[:, None] @ rotation_matrix(regressed["global_orient"]))
-        pose = regressed["body_pose"]
-        posed = self.body(transl, orient, pose)
+        orient_matrix = frame.rotation[:, None] @ rotation_matrix(regressed["global_orient"])
+        pose_matrix = rotation_matrix(regressed["body_pose"])  # made orthonormal once, for the body and the reward
+        posed = self.body.from_matrices(transl, orient_matrix, pose_matrix)
+        orient, pose = matrix_to_sixd(orient_matrix), matrix_to_sixd(pose_matrix)  # new tensors, orthonormal
         reprojected = self.body.skin_with_rows(posed, self.marker_rows)
         predicted = to_world(future.flatten(1, 2), frame).unflatten(1, (-1, future.shape[2]))
         markers = seed_world["markers"].new_empty((len(rows), PRIMITIVE_FRAMES, *predicted.shape[2:]))
@@ -272,7 +274,7 @@ class GammaGenerator(torch.nn.Module):
             regressed_feet = reprojected[:, :, self.leg_fit_slots]
             targets[..., 2] = regressed_feet[..., 2]  # heights: the regressor's (module doc, 5)
             fitted = fit_legs(self.body, posed, transl, regressed_feet, targets)
-            pose, posed = pose.clone(), fitted.posed
+            posed = fitted.posed
             pose[..., LEG_POSE_ROWS.to(pose.device), :] = matrix_to_sixd(fitted.leg_pose)
             reprojected = self.body.skin_with_rows(posed, self.marker_rows)
         new = {"predicted_markers": predicted, "reprojected_markers": reprojected, "joints": posed.joints,

@@ -57,8 +57,9 @@ def test_the_clean_priors_load_in_their_envs_and_record_their_data():
     assert "--prior-init" in defaults["wandr.pt"]["command"] and "train wandr" in defaults["wandr.pt"]["replaces"]["command"]
     for name in ("gamma_predictor_1f.pt", "gamma_predictor_2f.pt", "gamma_regressor.pt"):
         assert "uncleaned" in defaults[name]["replaces"]["why"], name
-    policy = defaults["ppo_gammareach_alpha1_paper.zip"]  # learnt on the clean prior beside the defaults, then fine-tuned
-    assert "weights_dir=motion_envs/priors/weights/clean" in policy["stages"][0]["command"] and policy["replaces"]["why"]
+    policy = defaults["ppo_gammareach_alpha1_paper.zip"]  # learnt on the default (clean) GAMMA prior, then fine-tuned
+    assert "weights_dir=" not in policy["stages"][0]["command"] and policy["stages"][0]["command"].startswith("motion-envs train ppo")
+    assert "--init" in policy["stages"][-1]["command"] and policy["replaces"]["command"] and policy["replaces"]["why"]
     manifest = json.loads((CLEAN_WEIGHTS_DIR / "manifest.json").read_text())
     assert manifest["clops.pt"]["data_hash"].startswith("motion_") and "train" in manifest["clops.pt"]["command"]
     env = gym.make("motion_envs/ClopsNav-v0", weights=str(CLEAN_WEIGHTS_DIR / "clops.pt"))

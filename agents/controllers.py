@@ -21,11 +21,13 @@ from motion_envs.envs.core import BatchedCore
 
 class PolicyLatent:
     """A saved PPOKL policy. Sampled latents by default, as the paper (its release does not use the mean); a body's
-    noise depends only on the seed and its index in `bodies` (`BodyNoise`). `file` says what it was trained for (`agents.policy_files`); a file of another kind fails here, by name."""
+    noise depends only on the seed and its index in `bodies` (`BodyNoise`). `file` says what it was trained for (`agents.policy_files`); a file of another kind fails here, by name. The network runs on `device`; latents
+    come back on the CPU."""
 
-    def __init__(self, path: str | Path, deterministic: bool = False, seed: int = 0, bodies: torch.Tensor | None = None) -> None:
+    def __init__(self, path: str | Path, deterministic: bool = False, seed: int = 0, bodies: torch.Tensor | None = None,
+                 device: str = "cpu") -> None:  # fmt: skip
         self.file = expect_policy(path, "ppo_policy")
-        self.model = PPOKL.load(path, device="cpu")
+        self.model = PPOKL.load(path, device=device)
         self.deterministic = deterministic
         self.noise = BodyNoise(seed, bodies)
 

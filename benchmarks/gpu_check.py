@@ -6,6 +6,8 @@
    GPU's matmuls reassociate sums differently, so the two agree to float32 rounding, not bit for bit, and the
    autoregressive rollouts let that grow; 1e-4 m is a tenth of a millimetre.
 2. Throughput: body-primitives/s at 1,024 to 16,384 bodies in fp32 and bf16 (`GammaReachConfig.precision`).
+3. End to end: every env with its shipped policy, PPO and DQN training and the tree search on CUDA
+   (`benchmarks.gpu_end_to_end`).
 
 Writes the "GAMMA on CUDA" section of `benchmarks/results/throughput.md`. Without CUDA it says so and returns 0
 without writing anything (`main` returns 0 so that `bench gpu` on a laptop is not an error).
@@ -19,6 +21,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from benchmarks.gpu_end_to_end import end_to_end, table
 from benchmarks.machine import machine_line
 from benchmarks.sections import replace_section
 from benchmarks.throughput import best_seconds, walking_state
@@ -89,6 +92,7 @@ def main() -> int:
     distance = max(gamma, wandr)
     core = GammaReachCore(GammaReachConfig(device="cuda"))
     rows = [(count, precision, throughput(core, count, precision)) for count in BATCHES for precision in ("float32", "bfloat16")]
+    jobs = end_to_end("cuda")
     verdict = "within" if distance <= TOLERANCE_M else "BEYOND"
     lines = [
         SECTION, "",
@@ -98,9 +102,12 @@ def main() -> int:
         "tolerance.", "",
         "| bodies | networks | body-primitives/s |", "|---|---|---|",
         *[f"| {count:,} | {precision} | {rate:,.0f} |" for count, precision, rate in rows],
+        "", "End to end on CUDA (`benchmarks/gpu_end_to_end.py`): each shipped policy in its env, with the env's prior "
+        "and the policy's network on the GPU, deterministic actions, one frame rendered; tiny PPO and DQN runs; the "
+        "tree search.", "", *table(jobs),
         "", machine_line(), f"Command: `motion-envs bench gpu`; {time.perf_counter() - began:.0f} s in all.", "",
     ]  # fmt: skip
     section = "\n".join(lines)
     print(section)
     replace_section(RESULTS / "throughput.md", section)
-    return 0 if distance <= TOLERANCE_M else 1
+    return 0 if distance <= TOLERANCE_M and all(job.ran for job in jobs) else 1

@@ -78,6 +78,27 @@ def test_the_gpu_checks_rollouts_run_on_the_cpu():
     assert (gamma[1, :, -1, -1] - gamma[0, :, 0, -1]).norm(dim=-1).max() > 0  # the pelvis moved
 
 
+def test_the_gpu_checks_end_to_end_jobs_run_on_the_cpu_and_report_failures():
+    """`bench gpu`'s end-to-end jobs on the CPU here, at a few steps: a shipped policy in its env, PPO training and
+    the tree search (the GammaReach, GammaWander and ClopsNav episodes and DQN training take the same paths as
+    these, ~1 minute more on 2 cores); a job that raises becomes a row naming its error instead of stopping the rest."""
+    from benchmarks.gpu_end_to_end import jobs, run_job, table
+
+    work = jobs("cpu", steps=2, timesteps=16)
+    assert len(work) == 7
+    results = [run_job(name, work[name]) for name in ("ppo_wandrreach_alpha1_default.zip in its env",
+                                                      "train ppo (GammaReach, from scratch)",
+                                                      "tree search (GammaReach, α = 1 policy)")]  # fmt: skip
+    assert all(result.ran and result.steps > 0 for result in results), table(results)
+
+    def broken() -> tuple[int, bool]:
+        raise RuntimeError("Expected all tensors to be on the same device\nmore detail")
+
+    failed = run_job("broken", broken)
+    assert not failed.ran and failed.error == "RuntimeError: Expected all tensors to be on the same device"
+    assert "no: RuntimeError" in table([failed])[-1]
+
+
 def test_machine_line_names_the_cpu_and_any_instruction_set_limit(monkeypatch):
     """Every benchmark's machine line: the CPU flags that decide the kernels, and an ISA limit where one is set (an
     estimate of an older CPU on a newer one must say so)."""

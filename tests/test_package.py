@@ -69,13 +69,15 @@ def test_the_gpu_checks_rollouts_run_on_the_cpu():
     """The CUDA agreement check's two rollouts, on the CPU here (what `bench gpu` compares with CUDA)."""
     import torch
 
-    from benchmarks.gpu_check import rollout_positions, wandr_joints
+    from benchmarks.gpu_check import rollout_positions, wandr_joints, wandr_step_agreement
 
     gamma = rollout_positions("cpu", torch.randn(2, 3, 128, generator=torch.Generator().manual_seed(0)))
     wandr = wandr_joints("cpu", torch.randn(4, 3, 64, generator=torch.Generator().manual_seed(0)))
     assert gamma.shape == (2, 3, 10, 68, 3) and wandr.shape == (4, 3, 22, 3)
     assert torch.isfinite(gamma).all() and torch.isfinite(wandr).all()
     assert (gamma[1, :, -1, -1] - gamma[0, :, 0, -1]).norm(dim=-1).max() > 0  # the pelvis moved
+    # each frame stepped twice from the same state on one device, same shapes: equal by construction
+    assert wandr_step_agreement(torch.randn(3, 2, 64, generator=torch.Generator().manual_seed(1)), device="cpu") == 0.0
 
 
 def test_the_gpu_checks_end_to_end_jobs_run_on_the_cpu_and_report_failures():

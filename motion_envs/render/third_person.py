@@ -75,9 +75,12 @@ class ThirdPersonRenderer:
 
     @torch.no_grad()
     def vertices(self, transl: torch.Tensor, global_orient: torch.Tensor, body_pose: torch.Tensor) -> np.ndarray:
-        """Posed mesh vertices (B, V, 3) of B bodies (rotations axis-angle or 6-D)."""
-        posed = self.body(transl.float(), global_orient.float(), body_pose.float())
-        return self.body.skin_with_rows(posed, self.rows if transl.ndim == 1 or len(transl) == 1 else self.crowd_rows).numpy()
+        """Posed mesh vertices (B, V, 3) of B bodies (rotations axis-angle or 6-D), posed on the body model's device
+        (an env's model on CUDA poses there) and returned on the CPU."""
+        device = self.rows.device
+        posed = self.body(*(tensor.to(device, torch.float32) for tensor in (transl, global_orient, body_pose)))
+        rows = self.rows if transl.ndim == 1 or len(transl) == 1 else self.crowd_rows
+        return self.body.skin_with_rows(posed, rows).cpu().numpy()
 
     def render(self, vertices: np.ndarray, camera: Camera, goal: np.ndarray | None = None, goal_radius: float = 0.75,
                trail: np.ndarray | list[np.ndarray] | None = None, goal_shape: str = "ring",

@@ -1,7 +1,9 @@
 """Every Python snippet of README.md runs verbatim in a fresh interpreter from a folder outside the repository.
 
 The one change: training lengths are shrunk (`shrink_training`, the switch README.md names): the number given to
-`.learn(...)` becomes `SHORT_TRAINING` steps, so the snippets that train a policy run in seconds, not hours."""
+`.learn(...)` becomes `SHORT_TRAINING` steps, and an SB3 `PPO(...)` collects `SHORT_TRAINING` steps per rollout
+(its default 2,048 would outlast the shrunk `.learn`: 58 s of single-body GammaReach steps on 2 cores), so the
+snippets that train a policy run in seconds, not hours."""
 
 from __future__ import annotations
 
@@ -31,14 +33,17 @@ def python_snippets() -> list[tuple[int, str]]:
 
 
 def shrink_training(code: str) -> str:
-    """`learn(total_timesteps=100_000)` / `learn(150_000)` -> `SHORT_TRAINING` steps."""
-    return re.sub(r"\.learn\((total_timesteps=)?[\d_]+", lambda m: f".learn({m.group(1) or ''}{SHORT_TRAINING}", code)
+    """`learn(total_timesteps=100_000)` / `learn(150_000)` -> `SHORT_TRAINING` steps; `PPO("MlpPolicy", env, ...`
+    -> `PPO("MlpPolicy", env, n_steps=SHORT_TRAINING, batch_size=SHORT_TRAINING, ...`."""
+    code = re.sub(r"\.learn\((total_timesteps=)?[\d_]+", lambda m: f".learn({m.group(1) or ''}{SHORT_TRAINING}", code)
+    return re.sub(r"\bPPO\(([^,]+, [^,]+),", rf"PPO(\1, n_steps={SHORT_TRAINING}, batch_size={SHORT_TRAINING},", code)
 
 
 def test_readme_has_the_snippets_it_should():
     snippets = python_snippets()
     assert len(snippets) >= 6 and any(".learn(" in code for _, code in snippets)
     assert "learn(64" in shrink_training("model.learn(150_000)") and "total_timesteps=64" in shrink_training(".learn(total_timesteps=1_000)")
+    assert shrink_training('PPO("MlpPolicy", env, verbose=1)') == 'PPO("MlpPolicy", env, n_steps=64, batch_size=64, verbose=1)'
 
 
 @pytest.mark.parametrize("line, code", python_snippets(), ids=[f"line{line}" for line, _ in python_snippets()])

@@ -223,7 +223,7 @@ def latent_cost(z: torch.Tensor) -> torch.Tensor:
 class ClopsRewardConfig:
     """Scales of CLOPS's reward (Eq. 5), paid per action; the paper's constants were lost from its text, these are ours.
 
-    r = −time − collision · collided − still · stayed + goal · found − left_room · left
+    r = −time − collision · collided − still · stayed + goal · found − left_room · left − fallen · fell
     """
 
     time: float = 0.1
@@ -237,6 +237,8 @@ class ClopsRewardConfig:
     left_room: float = 5.0
     """Ours, not the paper's (its Replica rooms are closed): the action after which the pelvis is out of the room
     (`ClopsNavConfig.room_margin`); the episode ends there."""
+    fallen: float = 5.0
+    """Ours: the action during which the pelvis fell below `ClopsNavConfig.fall_height`; the episode ends there."""
 
     @classmethod
     def named(cls, spec: str) -> ClopsRewardConfig:

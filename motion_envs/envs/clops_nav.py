@@ -200,6 +200,12 @@ class ClopsNavConfig:
     out of the room would otherwise see only the void for the rest of its episode (collision-free, a place to hide).
     As a truncation (bootstrapped from the void's value, never learnt) it cost nothing: 10 of the open-trained
     policy's 30 failures on open test rooms were walks out of the room, most from starts facing a near wall."""
+    fall_height: float = 0.3
+    """An episode ends (terminated, failed, `ClopsRewardConfig.fallen` paid) at the first frame the pelvis is lower
+    than this (m), the body frozen there: the prior lets bodies fall and stay down (under uniform random actions
+    16 of 128 bodies had the pelvis below 0.3 m within 15 actions, most after frame 300), and a body lying on the
+    floor is no walk to learn from or to show, as Gymnasium's Humanoid ends an episode when its torso leaves its
+    healthy height. 0: off (the raw prior, as `bench floor` measures it)."""
     known_goal: bool = False
     goal_memory: bool = False
     """Observe a memory of what the view has shown (module doc; ours). The paper's CLOPS has none and names it its
@@ -222,6 +228,8 @@ class ClopsNavConfig:
             raise ValueError(f"need width, height >= 8 and 0 < fov < 180, got {self.width}, {self.height}, {self.fov}")
         if min(self.max_chunk_frames, self.max_seconds, self.collision_every, self.reach_distance, self.reach_angle) <= 0:
             raise ValueError("max_chunk_frames, max_seconds, collision_every, reach_distance and reach_angle must be positive")
+        if self.fall_height < 0:
+            raise ValueError(f"fall_height must be >= 0 (0: off), got {self.fall_height}")
         if not 1 <= self.train_scenes <= len(TRAIN_SEEDS):
             raise ValueError(f"train_scenes must lie in [1, {len(TRAIN_SEEDS)}], got {self.train_scenes}")
         if self.scene_seeds is not None and len(self.scene_seeds) == 0:
@@ -286,6 +294,7 @@ class ClopsStepResult:
     collided: torch.Tensor
     frames: torch.Tensor
     left_room: torch.Tensor
+    fallen: torch.Tensor
     trajectory: list[WandrState] | None = None
     """With `keep_frames`: the bodies after every generated frame of the chunk (frozen bodies repeat)."""
 
@@ -457,6 +466,7 @@ class ClopsNavCore:
         target = action_targets(start_head, self.prior.actions[actions])
         body, frame, lowest_id, lowest_xy, skated = state.body, state.frame, state.lowest_id, state.lowest_xy, state.skated
         active = (frame < config.max_frames) & ~state.found
+        fallen = torch.zeros_like(active)
         checked, trajectory = [], []
         latent = self.prior.config.latent
         noise = config.latent_scale * counter_normal(state.noise_key, start_frame, config.max_chunk_frames * latent)
@@ -471,7 +481,9 @@ class ClopsNavCore:
                 trajectory.append(body)
             if index % config.collision_every == 0:
                 checked.append(body.joints)
-            active = active & ~self.stepper.reached(body, target) & (frame < config.max_frames)
+            fell = active & (body.joints[:, PELVIS, 2] < config.fall_height) if config.fall_height > 0 else fallen
+            fallen = fallen | fell
+            active = active & ~fell & ~self.stepper.reached(body, target) & (frame < config.max_frames)
             if not active.any():
                 break
         checked.append(body.joints)
@@ -488,15 +500,17 @@ class ClopsNavCore:
         found = goal_found(state.distance, visible, config.success_distance)
         state = dataclasses.replace(state, found=found)
         left = self.left_room(state) & ~found
+        fallen = fallen & ~found
         terms = {"time": torch.ones(count, device=self.device), "collision": collided.float(),
                  "still": stayed_still(moved_by, turned, config.still_distance, config.still_angle).float(),
-                 "goal": found.float(), "left_room": left.float()}  # fmt: skip
+                 "goal": found.float(), "left_room": left.float(), "fallen": fallen.float()}  # fmt: skip
         reward = (scales.goal * terms["goal"] - scales.time * terms["time"] - scales.collision * terms["collision"]
-                  - scales.still * terms["still"] - scales.left_room * terms["left_room"])  # fmt: skip
-        terminated = found | left
+                  - scales.still * terms["still"] - scales.left_room * terms["left_room"]
+                  - scales.fallen * terms["fallen"])  # fmt: skip
+        terminated = found | left | fallen
         truncated = (frame >= config.max_frames) & ~terminated
         return state, ClopsStepResult(reward, terms, terminated, truncated, collided, frame - start_frame, left,
-                                      trajectory if keep_frames else None)  # fmt: skip
+                                      fallen, trajectory if keep_frames else None)  # fmt: skip
 
     @property
     def goal_marker(self) -> tuple[str, float]:
@@ -610,6 +624,7 @@ def _step_info(state: ClopsNavState, result: ClopsStepResult, index: int) -> dic
         "chunk_frames": int(result.frames[index]),
         "collided": bool(result.collided[index]),
         "left_room": bool(result.left_room[index]),
+        "fallen": bool(result.fallen[index]),
         "collision_rate": float(state.collided[index]) / actions,
         "foot_skating": float(state.skated[index]) / max(int(state.frame[index]), 1),
     }
@@ -636,7 +651,7 @@ class ClopsNavVectorEnv(CoreVectorEnv):
     def _step_info(self, result: ClopsStepResult) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         state = self.state
         info = {"distance": state.distance.cpu().numpy(), "collided": result.collided.cpu().numpy(),
-                "left_room": result.left_room.cpu().numpy(),
+                "left_room": result.left_room.cpu().numpy(), "fallen": result.fallen.cpu().numpy(),
                 "reward_terms": {name: value.cpu().numpy() for name, value in result.terms.items()}}  # fmt: skip
         done = (result.terminated | result.truncated).cpu().numpy()
         final = {"is_success": state.found.cpu().numpy() & done,

@@ -63,11 +63,13 @@ Controller = Callable[[ClopsNavCore, ClopsNavState], torch.Tensor]
 
 @dataclass(frozen=True)
 class Scores:
-    """One row on one family: SR, Col, FS in %, and the pelvis paths (N, T, 2) and views of episode 0."""
+    """One row on one family: SR, Col, FS and episodes ended by a fall (`ClopsNavConfig.fall_height`; NaN for the
+    GAMMA navigator, whose bodies are GAMMA's) in %, and the pelvis paths (N, T, 2) and views of episode 0."""
 
     success: float
     collision: float
     skating: float
+    fallen: float
     seconds: float
     paths: np.ndarray
     views: list[np.ndarray]
@@ -142,28 +144,36 @@ def scores_of(parts: list[dict]) -> Scores:
     """A row's scores on one family from its groups in order (paths and views: the first group's)."""
     found = np.concatenate([part["found"] for part in parts])
     collided, skated = (tuple(map(sum, zip(*(part[key] for part in parts)))) for key in ("collided", "skated"))
+    fallen = np.concatenate([part["fallen"] for part in parts])
     return Scores(100 * float(found.mean()), 100 * collided[0] / max(collided[1], 1), 100 * skated[0] / max(skated[1], 1),
-                  float(np.concatenate([part["seconds"] for part in parts]).mean()), parts[0]["paths"], parts[0]["views"])  # fmt: skip
+                  100 * float(fallen.mean()), float(np.concatenate([part["seconds"] for part in parts]).mean()),
+                  parts[0]["paths"], parts[0]["views"])  # fmt: skip
 
 
 def run(core: ClopsNavCore, state: ClopsNavState, controller: Controller) -> dict:
-    """Step every episode to its end (found or 15 s); frozen bodies are not counted after their end. Returns the
-    counts `scores_of` merges: found (N,), (collided, actions) and (skated, frames) sums, seconds (N,), the pelvis
-    paths (N, T, 2) and episode 0's views."""
+    """Step every episode to its end (found, left the room, fallen or 15 s); the core steps every body until the
+    last ends, and what a body does after its own end is not counted (one that left the room or fell could walk
+    on to the goal). Returns the counts `scores_of` merges: found (N,), fallen (N,), (collided, actions) and
+    (skated, frames) sums, seconds (N,), the pelvis paths (N, T, 2) and episode 0's views."""
     count = state.num_bodies
     alive = torch.ones(count, dtype=torch.bool)
     actions, collided = torch.zeros(count), torch.zeros(count)
+    found, fallen = torch.zeros(count, dtype=torch.bool), torch.zeros(count, dtype=torch.bool)
+    skated, frames = torch.zeros(count), torch.zeros(count)
     paths, views = [state.joints[:, PELVIS, :2].numpy()], [state.view[0].numpy()]
     while alive.any():
         state, result = core.step(state, controller(core, state))
         actions += alive.float()
         collided += (result.collided & alive).float()
+        found |= state.found & alive
+        fallen |= result.fallen & alive
+        skated, frames = (torch.where(alive, now.float(), then) for now, then in ((state.skated, skated), (state.frame, frames)))
         paths.append(np.where(alive[:, None].numpy(), state.joints[:, PELVIS, :2].numpy(), np.nan))
         if alive[0]:
             views.append(state.view[0].numpy())
         alive &= ~(result.terminated | result.truncated)
-    return {"found": state.found.numpy(), "collided": (float(collided.sum()), float(actions.sum())),
-            "skated": (float(state.skated.sum()), float(state.frame.sum())), "seconds": state.frame.float().numpy() / 30,
+    return {"found": found.numpy(), "fallen": fallen.numpy(), "collided": (float(collided.sum()), float(actions.sum())),
+            "skated": (float(skated.sum()), float(frames.sum())), "seconds": frames.numpy() / 30,
             "paths": np.stack(paths, 1), "views": views}  # fmt: skip
 
 
@@ -173,7 +183,7 @@ def gamma_row(core: ClopsNavCore, state: ClopsNavState) -> dict:
     from baselines.gamma_navigator import gamma_navigate
 
     stats = gamma_navigate(core, state, PPOKL.load(GAMMA_POLICY, device="cpu"))
-    return {"found": np.asarray(stats.found), "collided": (float(stats.collided_seconds.sum()), float(stats.seconds.sum())),
+    return {"found": np.asarray(stats.found), "fallen": np.full(len(stats.found), np.nan), "collided": (float(stats.collided_seconds.sum()), float(stats.seconds.sum())),
             "skated": (float(stats.skated.sum()), float(stats.frames.sum())), "seconds": np.asarray(stats.seconds, dtype=float),
             "paths": stats.paths, "views": []}  # fmt: skip
 
@@ -234,19 +244,21 @@ def write_results(rows: dict[str, dict[str, Scores]], families: tuple[str, ...],
         + ("in this process" if ray_address is None else f"as Ray tasks ({ray_address})")
         + f". `motion-envs bench clops{'' if ray_address is None else ' --ray ' + ray_address}` ({wall / 60:.0f} min).",
         machine_line(), "",
-        "SR: goal within 1 m and in view (%); Col: actions with a collision (%); FS: frames whose lowest foot vertex slid > 0.66 cm (%).",
+        "SR: goal within 1 m and in view (%); Col: actions with a collision (%); FS: frames whose lowest foot vertex slid > 0.66 cm (%); "
+        f"falls: episodes ended by the pelvis falling below {ClopsNavConfig.fall_height} m (%, `ClopsNavConfig.fall_height`; the GAMMA "
+        "navigator's bodies are GAMMA's: –).",
         "Home SR: on the held-out rooms of the family a policy was trained on; elsewhere: mean SR over the other families "
         "(the issue's targets: ≥ 80% and ≥ 60%, collisions ≤ 20%).",
-        "", "| row | " + " | ".join(f"{f} SR / Col / FS" for f in families) + " | mean SR | mean Col | mean FS | home SR | SR elsewhere |",
-        "|---|" + "---|" * (len(families) + 5),
+        "", "| row | " + " | ".join(f"{f} SR / Col / FS" for f in families) + " | mean SR | mean Col | mean FS | falls | home SR | SR elsewhere |",
+        "|---|" + "---|" * (len(families) + 6),
     ]  # fmt: skip
     for label, by_family in rows.items():
         cells = [f"{s.success:.0f} / {s.collision:.0f} / {s.skating:.0f}" for s in (by_family[f] for f in families if f in by_family)]
-        means = [np.mean([getattr(s, name) for s in by_family.values()]) for name in ("success", "collision", "skating")]
+        means = [np.mean([getattr(s, name) for s in by_family.values()]) for name in ("success", "collision", "skating", "fallen")]
         home = trained_on(label)
         split = (f"{by_family[home].success:.0f} | {np.mean([s.success for f, s in by_family.items() if f != home]):.0f}"
                  if home in by_family and len(by_family) > 1 else " | ")  # fmt: skip
-        lines.append(f"| {label} | " + " | ".join(cells) + " | " + " | ".join(f"{m:.0f}" for m in means) + f" | {split} |")
+        lines.append(f"| {label} | " + " | ".join(cells) + " | " + " | ".join("–" if np.isnan(m) else f"{m:.0f}" for m in means) + f" | {split} |")
     lines += ["", "The paper (Replica scenes, its own X cm; Table 2 trains and tests on S1):", "", "| row | SR | Col | FS |", "|---|---|---|---|"]
     lines += [f"| {label} | {sr} | {col} | {fs} |" for label, (sr, col, fs) in PAPER_TABLE2.items()]
     lines += ["", "The paper's Table 1 (rows: train scene, columns: test scene S1-S5), SR / Col %:", ""]

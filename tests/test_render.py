@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from motion_envs.render.camera import Camera, follow_camera
-from motion_envs.render.third_person import ThirdPersonRenderer, body_mesh
+from motion_envs.render.third_person import ThirdPersonRenderer, body_mesh, facing
 
 
 def test_lower_detail_mesh_keeps_a_subset_of_the_vertices():
@@ -99,3 +99,25 @@ def test_play_writes_a_video_of_every_kept_frame_and_summarises(tmp_path):
                      save_rollout=tmp_path / "wander.npz", max_primitives=3, scene="living")  # a GammaReach policy drives it
     assert wander["steps"] == 3 and "collisions" in wander and len(iio.imread(video)) == 7
     assert Rollout.load(tmp_path / "wander.npz").scene.startswith("living:")
+
+
+def test_only_faces_towards_the_eye_go_to_embree_and_a_closed_mesh_casts_the_same():
+    """`facing` keeps the front faces: rays from outside a closed mesh (an icosphere) hit the same points through
+    the kept half as through the whole mesh; seen from the other side the other half is kept."""
+    import trimesh
+
+    from motion_envs.render.raycast import RayCaster
+
+    sphere = trimesh.creation.icosphere(subdivisions=3, radius=0.5)
+    vertices, faces = sphere.vertices.astype(np.float32), sphere.faces
+    eye = np.array([3.0, 0.4, 0.2], dtype=np.float32)
+    kept = facing(vertices, faces, eye)
+    assert 0.3 < kept.mean() < 0.5  # a little under half: the eye is 3 m away, not at infinity
+    assert not (kept & facing(vertices, faces, -eye)).any()
+    targets = vertices[np.random.default_rng(0).choice(len(vertices), 200)] * 0.9  # rays through the sphere
+    rays = (targets - eye) / np.linalg.norm(targets - eye, axis=1, keepdims=True)
+    origins = np.broadcast_to(eye, rays.shape)
+    _, whole = RayCaster(vertices, faces).cast(origins, rays)
+    _, front = RayCaster(vertices, faces[kept]).cast(origins, rays)
+    assert np.isfinite(whole).all() and np.allclose(whole, front, atol=1e-5)
+

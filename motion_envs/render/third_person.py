@@ -146,11 +146,23 @@ class ThirdPersonRenderer:
         rays = directions[window].reshape(-1, 3)
         mesh = self.mesh if count == len(self.mesh.vertex_ids) else self.crowd_mesh  # the LOD `vertices` chose
         faces = (mesh.faces[None] + (np.arange(bodies) * count)[:, None, None]).reshape(-1, 3)
+        faces = faces[facing(flat, faces, camera.eye)]
         triangle, distance = RayCaster(flat, faces).cast(np.broadcast_to(camera.eye, rays.shape), rays)
         front = distance < depth[window].reshape(-1)
         if front.any():
             shade = _lambert(flat[faces[triangle[front]]], rays[front])
             _paint(image, depth, window, front, WOOD * shade[:, None], distance[front])
+
+def facing(vertices: np.ndarray, faces: np.ndarray, eye: np.ndarray) -> np.ndarray:
+    """(F,) bool: the faces (F, 3) of `vertices` (V, 3) whose front (counter-clockwise) side looks at `eye` (3,).
+    A ray from outside a closed mesh hits a front face first, so only these go to embree: half the triangles, and
+    embreex's copy of a mesh costs time in proportion to it (8 bodies at 480 x 360 on an AVX2 EPYC, interleaved
+    frames: 51.3 -> 44.0 ms bare, 65.4 -> 57.8 ms in a room). The LOD meshes are not perfectly closed: 7 of
+    172,800 pixels changed with one body, 27 with eight, all on silhouettes."""
+    corners = vertices[faces]  # (F, 3, 3)
+    normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    return np.einsum("fk,fk->f", normals, eye - corners[:, 0]) > 0
+
 
 class _CutawayScene:
     """A scene's walls and furniture with every vertex lowered to at most `height` (boxes stay boxes, other

@@ -255,11 +255,12 @@ def _shade_shadow(ground: np.ndarray, points: np.ndarray, camera: Camera, first:
         return
     # x and y as separate planes: numpy's reductions over a trailing axis of 2 made this 20 of a frame's 64 ms
     # (8 bodies, 480 × 360)
+    # the blob over the whole window in float32, masked by multiplying (gathering the near pixels out and back
+    # cost 2 of a 43-ms frame with 8 bodies on an AVX2 EPYC; same image)
     x, y = points[window][..., 0], points[window][..., 1]  # (r, w) each
-    factor = np.ones(x.shape, dtype=np.float32)
-    dx, dy = x - centre[0], y - centre[1]
+    dx, dy = x - np.float32(centre[0]), y - np.float32(centre[1])
     near = np.maximum(np.abs(dx), np.abs(dy)) < 1.0
-    factor[near] -= 0.25 * np.exp(-(dx[near] ** 2 + dy[near] ** 2) / (2 * 0.25**2))
+    factor = 1.0 - np.float32(0.25) * np.exp((dx * dx + dy * dy) * np.float32(-1.0 / (2 * 0.25**2))) * near
     low = body[body[:, 2] < 0.03, :2]  # vertices within 3 cm of the ground
     if len(low):
         contacts = low[:: max(1, len(low) // 24)]

@@ -120,4 +120,3 @@ def test_only_faces_towards_the_eye_go_to_embree_and_a_closed_mesh_casts_the_sam
     _, whole = RayCaster(vertices, faces).cast(origins, rays)
     _, front = RayCaster(vertices, faces[kept]).cast(origins, rays)
     assert np.isfinite(whole).all() and np.allclose(whole, front, atol=1e-5)
-

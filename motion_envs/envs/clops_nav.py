@@ -481,9 +481,9 @@ class ClopsNavCore:
                 trajectory.append(body)
             if index % config.collision_every == 0:
                 checked.append(body.joints)
-            fell = active & (body.joints[:, PELVIS, 2] < config.fall_height) if config.fall_height > 0 else fallen
-            fallen = fallen | fell
-            active = active & ~fell & ~self.stepper.reached(body, target) & (frame < config.max_frames)
+            if config.fall_height > 0:  # 0: off (a pelvis below the floor must not count then)
+                fallen = fallen | (active & (body.joints[:, PELVIS, 2] < config.fall_height))
+            active = active & ~fallen & ~self.stepper.reached(body, target) & (frame < config.max_frames)
             if not active.any():
                 break
         checked.append(body.joints)

@@ -153,6 +153,7 @@ class ThirdPersonRenderer:
             shade = _lambert(flat[faces[triangle[front]]], rays[front])
             _paint(image, depth, window, front, WOOD * shade[:, None], distance[front])
 
+
 def facing(vertices: np.ndarray, faces: np.ndarray, eye: np.ndarray) -> np.ndarray:
     """(F,) bool: the faces (F, 3) of `vertices` (V, 3) whose front (counter-clockwise) side looks at `eye` (3,).
     A ray from outside a closed mesh hits a front face first, so only these go to embree: half the triangles, and
@@ -253,10 +254,9 @@ def _shade_shadow(ground: np.ndarray, points: np.ndarray, camera: Camera, first:
     window = _ground_window(camera, first, centre, 1.0)
     if window is None:
         return
-    # x and y as separate planes: numpy's reductions over a trailing axis of 2 made this 20 of a frame's 64 ms
-    # (8 bodies, 480 × 360)
-    # the blob over the whole window in float32, masked by multiplying (gathering the near pixels out and back
-    # cost 2 of a 43-ms frame with 8 bodies on an AVX2 EPYC; same image)
+    # x and y as separate planes (numpy's reductions over a trailing axis of 2 made this 20 of a frame's 64 ms,
+    # 8 bodies at 480 × 360), and the blob over the whole window in float32, masked by a product (gathering the
+    # near pixels out and back cost 2 of a 43-ms frame on an AVX2 EPYC; same image)
     x, y = points[window][..., 0], points[window][..., 1]  # (r, w) each
     dx, dy = x - np.float32(centre[0]), y - np.float32(centre[1])
     near = np.maximum(np.abs(dx), np.abs(dy)) < 1.0
@@ -269,6 +269,7 @@ def _shade_shadow(ground: np.ndarray, points: np.ndarray, camera: Camera, first:
         squared = (x[close][:, None] - contacts[:, 0]) ** 2 + (y[close][:, None] - contacts[:, 1]) ** 2  # (P, C)
         factor[close] *= np.prod(1.0 - 0.5 * np.exp(-squared / (2 * 0.05**2)), axis=1)
     ground[window] *= factor[..., None]
+
 
 def _lambert(triangles: np.ndarray, rays: np.ndarray) -> np.ndarray:
     """Shade (R,) of hit triangles (R, 3, 3) seen along `rays` (R, 3), on the side the rays see."""

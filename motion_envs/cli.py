@@ -518,7 +518,7 @@ def parser() -> argparse.ArgumentParser:
                        help="what to train; priors: every shipped prior with its recipe (motion_envs/priors/recipe.py)")
     train.add_argument("--stages", default=None,
                        help="priors: comma-separated stages to run (default all; e.g. "
-                            "wandr_short,wandr,clops_stage1,clops_stage2,clops)")
+                            "wandr_short,wandr_60,wandr,clops_stage1,clops_stage2,clops)")
     train.add_argument("--stage", default="predictor", help="gamma: predictor | regressor | pose-vae | g-cvae")
     train.add_argument("--seed-frames", type=int, default=2, choices=(1, 2), help="predictor: seed frames")
     train.add_argument("--epochs", type=int, default=None, help="epochs (predictor: single-primitive epochs)")

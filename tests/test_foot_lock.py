@@ -182,3 +182,18 @@ def test_bench_gamma_feet_walks_the_same_bodies_with_less_skating_under_the_rule
     assert abs(speeds[1] - speeds[0]) < 0.05 * speeds[0] and speeds[0] > 0.3, speeds
     assert table[True]["FS (WANDR's)"] < table[False]["FS (WANDR's)"], table
     assert table[True]["contact-aware FS"] < table[False]["contact-aware FS"], table
+
+
+def test_leg_joints_is_a_view_of_the_legs_by_part_then_side():
+    """`fit_legs` reads and writes the legs through `leg_joints`: hips, knees, ankles, toes, each left then right,
+    for per-joint vectors and matrices alike, and a write lands on exactly those joints."""
+    from motion_envs.body.leg_fit import LEG_JOINTS, leg_joints
+
+    for trailing, shape in ((1, (3,)), (2, (3, 3))):
+        values = torch.arange(22.0).view(1, 22, *[1] * trailing).expand(2, 22, *shape).clone()
+        legs = leg_joints(values, trailing)
+        assert legs.shape == (2, 4, 2, *shape)
+        assert torch.equal(legs[0, ..., *[0] * trailing], torch.tensor(LEG_JOINTS, dtype=torch.float32).view(2, 4).T)
+        legs.fill_(-1.0)
+        written = (values == -1.0).flatten(2).all(-1)  # (2, 22)
+        assert written[:, list(LEG_JOINTS)].all() and written.sum() == 2 * len(LEG_JOINTS)

@@ -17,8 +17,9 @@ towards a goal 15 m ahead, due at 16 s; ClopsNav's most forward action, over and
 over, with its episode rules off), the issue's target being >= 1.45 m. A goal
 farther than the prior walks by its deadline makes WANDR's wrist intention ask
 for a sprint (the needed mean velocity grows as the time runs out) and bodies
-lunge: 20 m ahead, as this table used to measure, sank the head to 1.13 m, 15 m
-to 1.22 m (the clean prior, 8 episodes). Writes `benchmarks/results/floor.md`.
+lunge: with the prior fine-tuned on rollouts of up to 60 frames (shipped before
+the 120-frame one), 20 m ahead, as this table used to measure, sank the head to
+1.13 m, 15 m to 1.22 m (8 episodes). Writes `benchmarks/results/floor.md`.
 """
 
 from __future__ import annotations

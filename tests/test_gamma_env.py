@@ -134,6 +134,28 @@ def test_markers_are_the_blend_of_prediction_and_the_regressed_body(gamma, body)
     assert gap.mean() < 0.05  # the regressed body stays within a few cm of its markers
 
 
+def test_latents_longer_than_latent_radius_are_scaled_to_it_and_shorter_ones_kept(gamma):
+    """A box corner (norm 45) steps as the same direction at norm 16 (`latent_radius`); z ~ N(0, I) (norm ~11)
+    steps exactly as with no cap (the scale is exactly 1 there)."""
+    import dataclasses
+
+    capped = GammaReachEnv(generator=gamma)
+    capped.reset(seed=6)
+    free = GammaReachEnv(generator=gamma, latent_radius=None)
+    corner = torch.where(torch.as_tensor(_latents(1, 6)) > 0, 4.0, -4.0)
+    normal = torch.as_tensor(_latents(1, 7))
+    start = capped.state.repeat(2)
+    _, cornered = capped.core.step(start, torch.cat([corner, corner * (16.0 / corner.norm())]))
+    assert torch.allclose(cornered.primitive.joints[0], cornered.primitive.joints[1], atol=1e-4)
+    _, with_cap = capped.core.step(start.index(torch.tensor([0])), normal)
+    _, without = free.core.step(start.index(torch.tensor([0])), normal)
+    assert torch.equal(with_cap.primitive.joints, without.primitive.joints)
+    _, uncapped_corner = free.core.step(start.index(torch.tensor([0])), corner)
+    assert not torch.allclose(uncapped_corner.primitive.joints, cornered.primitive.joints[:1], atol=1e-2)
+    with pytest.raises(ValueError, match="latent_radius"):
+        dataclasses.replace(capped.config, latent_radius=0.0)
+
+
 def test_bad_actions_raise_clear_errors(env):
     env.reset(seed=0)
     with pytest.raises(ValueError, match=r"shape \(128,\)"):

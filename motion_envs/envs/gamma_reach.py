@@ -12,8 +12,10 @@ from the previous one, 9 or 8 new), and the body moves.
 
 `Box(-4, 4, (128,), float32)`: the marker predictor's latent z, unscaled
 (the prior is N(0, I), so the box holds all but 6e-5 of its mass per
-coordinate). Actions outside the box are clipped to it; a wrong shape or a
-NaN/inf raises `ValueError`.
+coordinate). Actions outside the box are clipped to it, then scaled down to a
+norm of `latent_radius` (16) where longer: N(0, I) latents (norm 11.3) and the
+policies' are untouched, while uniform draws from the box (norm ~26) would
+fold bodies to the floor. A wrong shape or a NaN/inf raises `ValueError`.
 
 ## Observation Space
 
@@ -137,6 +139,13 @@ class GammaReachConfig:
     max_primitives: int = 60
     start_kind: str = "any"
     latent_bound: float = 4.0
+    """Each latent coordinate is clipped to ±latent_bound (the action space's box)."""
+    latent_radius: float | None = 16.0
+    """Then z is scaled down to this norm where it is longer (None: no cap). The prior was trained on z ~ N(0, I)
+    (norm 11.3 ± 0.7 in 128 dimensions) and the policies act near the data's latents (norm ~4-6), but uniform
+    in-range actions have a norm of ~26 (up to 45 in the box's corners), far outside anything the prior saw:
+    they folded bodies to a pelvis 0.23 m high (`bench floor`). The cap leaves N(0, I) and every policy's
+    actions as they are."""
     terminate_on_goal: bool = True
     weights_dir: str | None = None
     """Folder with the GAMMA weights (default: the shipped ones)."""
@@ -177,6 +186,8 @@ class GammaReachConfig:
             raise ValueError(f"start_kind must be one of {START_KINDS}, got {self.start_kind!r}")
         if self.max_primitives < 1 or self.area <= 0 or self.goal_radius <= 0 or self.latent_bound <= 0:
             raise ValueError("max_primitives, area, goal_radius and latent_bound must be positive")
+        if self.latent_radius is not None and self.latent_radius <= 0:
+            raise ValueError(f"latent_radius must be positive or None, got {self.latent_radius}")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -295,6 +306,8 @@ class GammaReachCore:
         """Generate one primitive per body from latents z (N, 128) and score it."""
         config, weights = self.config, self.config.reward
         z = z.to(self.device, torch.float32).clamp(-config.latent_bound, config.latent_bound)
+        if config.latent_radius is not None:
+            z = z * (config.latent_radius / z.norm(dim=-1, keepdim=True).clamp_min(config.latent_radius))
         primitive, next_seed = self.generator.step(state.seed, z, state.goal, ground_feet=config.ground_feet,
                                                     lock_feet=config.lock_feet)
         joints, goal = primitive.joints, state.goal

@@ -205,17 +205,20 @@ def test_walking_out_of_the_room_ends_the_episode_and_pays_for_it(core):
 
 
 def test_a_body_whose_pelvis_falls_below_fall_height_ends_its_episode_frozen_and_pays_for_it(core):
-    """fall_height set above a standing pelvis (1.5 m): the first frame counts as a fall, so the action stops after
-    one frame with the episode terminated and `fallen` paid; the same start and action with the rule off (0) go on.
-    A real fall is rare and late (after ~300 frames of random actions), so the threshold stands in for it."""
+    """fall_height set above a standing pelvis (1.5 m): the first frame counts as a fall, so it is not taken (the
+    body stays at its start, the last upright frame) and the episode ends with `fallen` paid; the same start and
+    action with the rule off (0) go on. A real fall is rare and late (after ~300 frames of random actions), so the
+    threshold stands in for it."""
     import dataclasses
 
     forward = int(core.prior.actions[:, 1].argmax())
     high = ClopsNavCore(dataclasses.replace(core.config, fall_height=1.5), core.prior)
     off = ClopsNavCore(dataclasses.replace(core.config, fall_height=0.0), core.prior)
-    _, fell = high.step(high.sample_initial_state([np.random.default_rng(5)]), torch.tensor([forward]))
+    start = high.sample_initial_state([np.random.default_rng(5)])
+    after, fell = high.step(start, torch.tensor([forward]))
     _, walked = off.step(off.sample_initial_state([np.random.default_rng(5)]), torch.tensor([forward]))
-    assert bool(fell.fallen[0]) and bool(fell.terminated[0]) and not bool(fell.truncated[0]) and int(fell.frames[0]) == 1
+    assert bool(fell.fallen[0]) and bool(fell.terminated[0]) and not bool(fell.truncated[0]) and int(fell.frames[0]) == 0
+    assert torch.equal(after.joints, start.joints) and torch.equal(after.transl, start.transl)
     assert not bool(walked.fallen[0]) and not bool(walked.terminated[0]) and int(walked.frames[0]) > 1
     scales, terms = core.config.reward, {name: float(value[0]) for name, value in fell.terms.items()}
     expected = -scales.time - scales.collision * terms["collision"] - scales.still * terms["still"] - scales.fallen

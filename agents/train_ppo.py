@@ -234,6 +234,7 @@ def train_ppo(config: PPOTrainConfig, clone_from: GoalWindows | None = None) -> 
         if model.prior_mean != config.kl_mean:
             raise ValueError(f"{config.init} was trained with kl_mean={model.prior_mean!r}, this run asks for "
                              f"{config.kl_mean!r}: the regulariser's centre (and its anchor) comes with the policy")
+        warm_reward_normaliser(model, venv, config.n_steps)
     else:
         model = new_model(config, venv)
         if config.init == "data":
@@ -245,6 +246,21 @@ def train_ppo(config: PPOTrainConfig, clone_from: GoalWindows | None = None) -> 
         callback.save()
     extra = {"cloning": json.loads(cloning_path.read_text())} if cloning_path.exists() else {}
     return ship_policy(model, config, curve, "ppo_policy", best=config.keep == "best", **extra)
+
+
+def warm_reward_normaliser(model: PPOKL, venv: VecNormalize, steps: int) -> None:
+    """Run the loaded policy for `steps` steps of every body so that `venv`'s return statistics match its returns.
+
+    A fine-tune (`init` a policy file) loads a critic fitted to returns scaled by its own run's statistics, which
+    the shipped zip does not carry; a fresh `VecNormalize` starts from unit variance and few samples, so the first
+    updates scale rewards wrongly and the advantages are noise. One rollout of the policy's own actions (no
+    learning) puts the scale where the critic was trained."""
+    observation = venv.reset()
+    for _ in range(steps):
+        actions, _ = model.predict(observation, deterministic=False)
+        observation, _, _, _ = venv.step(actions)
+    print(f"warmed the reward normaliser over {steps} steps x {venv.num_envs} bodies: return std "
+          f"{float(np.sqrt(venv.ret_rms.var)):.3g}", file=sys.stderr)
 
 
 def new_model(config: PPOTrainConfig, venv: Any) -> PPOKL:

@@ -151,24 +151,28 @@ sinking (head 1.50 m over the last of 3 s, 1.25 m over the 15th second)."""
 
 
 def sinking_rows(episodes: int, seed: int, body: BodyModel, weights_dir: Path | None = None) -> list[str]:
-    """Head height (m) at 1 s and over the last second of 15 s of sustained walking, per env (ClopsNav's episode
-    rules off: `SUSTAINED_CLOPS_WALK`)."""
+    """Head height (m) at 1 s and over the last second of 15 s of sustained walking, per env whose prior
+    `weights_dir` holds (ClopsNav's episode rules off: `SUSTAINED_CLOPS_WALK`)."""
     from motion_envs.play import wandr_controller
 
-    sampler = wandr_controller(None, None, seed)
-    wandr = head_heights("motion_envs/WandrReach-v0", lambda env, obs: sampler(env.unwrapped.core, env.unwrapped.state)[0].numpy(),
-                         15.0, episodes, seed, body, max_frames=480, goal_distance=(15.0, 15.0), goal_angle=(0.0, 0.0),
-                         goal_height=(1.0, 1.0), **prior_kwargs("motion_envs/WandrReach-v0", weights_dir))  # fmt: skip
+    walks = []
+    if has_priors("motion_envs/WandrReach-v0", weights_dir):
+        sampler = wandr_controller(None, None, seed)
+        walks.append(("WandrReach, WANDR sampler, goal 15 m ahead", head_heights(
+            "motion_envs/WandrReach-v0", lambda env, obs: sampler(env.unwrapped.core, env.unwrapped.state)[0].numpy(),
+            15.0, episodes, seed, body, max_frames=480, goal_distance=(15.0, 15.0), goal_angle=(0.0, 0.0),
+            goal_height=(1.0, 1.0), **prior_kwargs("motion_envs/WandrReach-v0", weights_dir))))  # fmt: skip
 
     def forward(env: gym.Env, observation: object) -> int:
         actions = env.unwrapped.core.prior.actions  # (K, 4): dx, dy, dz, dyaw
         return int(torch.argmax(actions[:, 1] - 2.0 * actions[:, 3].abs()))
 
-    clops = head_heights("motion_envs/ClopsNav-v0", forward, 15.0, episodes, seed, body, **SUSTAINED_CLOPS_WALK,
-                         **prior_kwargs("motion_envs/ClopsNav-v0", weights_dir))  # fmt: skip
+    if has_priors("motion_envs/ClopsNav-v0", weights_dir):
+        walks.append(("ClopsNav, most forward action (room exit, goal and fall rule off)", head_heights(
+            "motion_envs/ClopsNav-v0", forward, 15.0, episodes, seed, body, **SUSTAINED_CLOPS_WALK,
+            **prior_kwargs("motion_envs/ClopsNav-v0", weights_dir))))  # fmt: skip
     rows = []
-    for label, heights in (("WandrReach, WANDR sampler, goal 15 m ahead", wandr),
-                           ("ClopsNav, most forward action (room exit, goal and fall rule off)", clops)):  # fmt: skip
+    for label, heights in walks:
         lengths = np.isfinite(heights).sum(axis=1)
         final = [np.mean(h[max(0, n - 30) : n]) for h, n in zip(heights, lengths)]
         rows.append(f"| {label} | {episodes} | {np.median(lengths) / 30:.1f} | {np.nanmean(heights[:, 15:45]):.2f} "
@@ -181,6 +185,11 @@ def prior_files(env_id: str, weights_dir: Path) -> list[Path]:
     if env_id.endswith("GammaReach-v0"):
         return [weights_dir / f"gamma_{name}.pt" for name in ("predictor_1f", "predictor_2f", "regressor", "pose_vae")]
     return [weights_dir / ("wandr.pt" if env_id.endswith("WandrReach-v0") else "clops.pt")]
+
+
+def has_priors(env_id: str, weights_dir: Path | None) -> bool:
+    """Whether `weights_dir` holds every prior file the env loads (None: the shipped ones, always)."""
+    return weights_dir is None or all(path.exists() for path in prior_files(env_id, weights_dir))
 
 
 def prior_kwargs(env_id: str, weights_dir: Path | None) -> dict:
@@ -198,8 +207,8 @@ def main(steps: int = 2000, seed: int = 0, episodes: int = 8, weights_dir: Path 
     body = BodyModel()
     cases = []
     for env_id in POLICIES:
-        if weights_dir is not None and not all(Path(v).exists() for v in prior_files(env_id, weights_dir)):
-            continue  # that env's prior is not in weights_dir
+        if not has_priors(env_id, weights_dir):
+            continue
         sources = ("uniform", "policy") if env_id.endswith("ClopsNav-v0") else ("uniform", "normal", "policy")
         sources = tuple(s for s in sources if weights_dir is None or s != "policy")
         rules = ((True,),) if env_id.endswith("ClopsNav-v0") else ((True,), (False,))

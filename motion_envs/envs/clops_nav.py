@@ -60,7 +60,9 @@ a random heading; the goal sphere's centre at a height in `goal_height`.
 
 Terminates when the goal is found, or (failed) when the pelvis has left
 the room (`room_margin` outside the walkable rectangle; ours: the prior is
-kinematic and walks through walls); truncates after `max_seconds` (15 s =
+kinematic and walks through walls), or (failed) when the prior's next frame
+would drop the pelvis below `fall_height` (0.3 m; ours: that frame is not
+taken, the body stays at its last upright one); truncates after `max_seconds` (15 s =
 450 frames) of generated motion. Collisions never end an episode (as the
 paper).
 

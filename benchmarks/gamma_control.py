@@ -365,7 +365,8 @@ def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False,
         "", *per_body_table(rows, start),
     ]  # fmt: skip
     lines += ["", f"The prior's networks ran in {core.generator.precision} (`precision=\"auto\"`: bf16 only on a CPU with "
-              f"native bf16, `motion_envs.precision`). Prior and policies: {weights_dir or 'the shipped ones'}."]  # fmt: skip
+              f"native bf16, `motion_envs.precision`). Prior: {weights_dir or 'the shipped one'}; policies: "
+              f"{'the files named in the rows' if policies else weights_dir or 'the shipped ones'}."]  # fmt: skip
     if (bf16 or core.generator.precision == "bfloat16") and searcher is not None:
         check_pairs, check_clones = BF16_CHECK
         subset = start.index(torch.arange(min(check_pairs, pairs)))
@@ -380,7 +381,8 @@ def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False,
     lines += ["", machine_line(), f"Command: `motion-envs bench gamma{' --quick' if quick else ''}{' --bf16' if bf16 else ''}"
               f"{'' if requested == 'auto' else ' --precision ' + requested}{' --output ' + output if output else ''}"
               f"{'' if ray_address is None else ' --ray ' + ray_address}"
-              f"{'' if weights_dir is None else ' --weights-dir ' + str(weights_dir)}`; "
+              f"{'' if weights_dir is None else ' --weights-dir ' + str(weights_dir)}"
+              f"{'' if not policies else ' --policies ' + ' '.join(str(path) for path in policies)}`; "
               f"{time.perf_counter() - began:.0f} s in all.", "", f"![paths]({stem}.png)", ""]  # fmt: skip
     text = "\n".join(lines)
     print(text)

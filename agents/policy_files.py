@@ -61,6 +61,10 @@ class PolicyFile:
     observation_space: gym.Space
     action_space: gym.Space
     trained_for: TrainedFor | None
+    alpha: float | None = None
+    """PPO (`PPOKL`): α of the latent regulariser; None for DQN."""
+    kl_mean: str | None = None
+    """PPO: the regulariser's centre ("zero" or "cloned", `PPOKL.prior_mean`); None for DQN."""
 
 
 def read_policy_file(path: str | Path) -> PolicyFile:
@@ -93,7 +97,8 @@ def read_policy_file(path: str | Path) -> PolicyFile:
                               + "; ".join(POLICY_KINDS.values()))  # fmt: skip
     stored = data.get("trained_for")
     trained_for = TrainedFor(**stored) if isinstance(stored, dict) else _from_manifest(path)
-    return PolicyFile(path, kind, data["observation_space"], data["action_space"], trained_for)
+    return PolicyFile(path, kind, data["observation_space"], data["action_space"], trained_for,
+                      data.get("kl_prior_coef"), data.get("prior_mean"))  # fmt: skip
 
 
 def _from_manifest(path: Path) -> TrainedFor | None:

@@ -51,6 +51,7 @@ import torch
 from tqdm import tqdm
 
 from agents.controllers import PolicyLatent
+from agents.policy_files import read_policy_file
 from baselines.g_cvae import G_CVAE_WEIGHTS, goal_cvae_generator
 from baselines.latent_controllers import RandomLatent
 from benchmarks.fanout import group_seed, run_grouped, spans
@@ -221,12 +222,13 @@ CLONED_CENTRE = ", KL to N(cloned, I)"
 
 
 def policy_label(path: Path) -> str:
-    """ppo_gammareach_alpha10_paper.zip -> "policy(10)"; another reward is named: "policy(10), release reward";
-    ppo_gammareach_alpha10_paper_cloned.zip -> "policy(10), KL to N(cloned, I)"."""
-    alpha, _, reward = path.stem.removeprefix("ppo_gammareach_alpha").partition("_")
-    cloned = reward.endswith("_cloned")
-    reward = reward.removesuffix("_cloned")
-    return f"policy({alpha})" + ("" if reward == "paper" else f", {reward} reward") + (CLONED_CENTRE if cloned else "")
+    """A GammaReach PPO policy's row label from what its file holds (α, the regulariser's centre, the reward it was
+    trained on), whatever its name: "policy(10)"; another reward is named: "policy(10), release reward"; a
+    regulariser centred on the cloned policy: "policy(10), KL to N(cloned, I)"."""
+    policy = read_policy_file(path)
+    reward = (policy.trained_for.env_kwargs if policy.trained_for else {}).get("reward", "paper")
+    return (f"policy({policy.alpha:g})" + ("" if reward == "paper" else f", {reward} reward")
+            + (CLONED_CENTRE if policy.kl_mean == "cloned" else ""))  # fmt: skip
 
 
 BF16_CHECK = (20, 8)

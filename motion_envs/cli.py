@@ -111,6 +111,12 @@ def _bench_floor(args: argparse.Namespace) -> int:
     return floor(steps=args.steps, seed=args.seed, weights_dir=args.weights_dir, output=args.output or "floor")
 
 
+def _bench_gamma_turns(args: argparse.Namespace) -> int:
+    from benchmarks.gamma_turns import main as gamma_turns
+
+    return gamma_turns(bodies=args.bodies, seed=args.seed)
+
+
 def _bench_speed(args: argparse.Namespace) -> int:
     from benchmarks.throughput import main as throughput
 
@@ -647,6 +653,10 @@ def parser() -> argparse.ArgumentParser:
     video.add_argument("--clip", default="cmu/08_11", help="clip name in the cache (folder/file without suffix)")
     _add_data_args(video, list(SHIPPED_SUBSETS))
     video.set_defaults(run=_bench_cleanup_video)
+    turns = bench.add_parser("gamma-turns", help="left and right turns of GAMMA's prior and policy (gamma_turns.md)")
+    turns.add_argument("--bodies", type=int, default=1024, help="bodies of the prior's rows (a quarter per policy row)")
+    turns.add_argument("--seed", type=int, default=0)
+    turns.set_defaults(run=_bench_gamma_turns)
     bench_floor = bench.add_parser("floor", help="feet on the floor in every env, with and without its floor rule (floor.md)")
     bench_floor.add_argument("--steps", type=int, default=2000, help="env steps per row")
     bench_floor.add_argument("--seed", type=int, default=0)

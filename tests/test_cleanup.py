@@ -108,6 +108,31 @@ def test_mirroring_swaps_the_contacts_of_the_feet(body):
     assert mirrored.info["contacts"][:, 3].all() and mirrored.info["contacts"].sum() == 3
 
 
+def test_mirroring_a_left_turn_gives_a_right_turn_of_the_same_angle(body):
+    """The GAMMA prior, trained on clips and their mirror images, still turns left (`bench gamma-turns`): the
+    mirror itself is not the cause. A standing body yawing 1 rad left about the vertical turns 1 rad right
+    mirrored (heading by `rewards.facing_direction`)."""
+    import roma
+
+    from motion_envs.rewards import facing_direction
+
+    frames = 12
+    yaw = roma.rotvec_to_rotmat(torch.stack([torch.zeros(frames), torch.zeros(frames), torch.linspace(0.0, 1.0, frames)], 1))
+    start = standing(body, np.zeros((frames, 3)))
+    orient = roma.rotvec_to_rotmat(torch.as_tensor(start.global_orient, dtype=torch.float32))
+    turning = replace(start, global_orient=roma.rotmat_to_rotvec(yaw @ orient).numpy())
+
+    def turned(motion: BodyMotion) -> float:
+        joints = body(*(torch.as_tensor(value, dtype=torch.float32)
+                        for value in (motion.transl, motion.global_orient, motion.body_pose))).joints  # fmt: skip
+        forward = facing_direction(joints)
+        angle = np.unwrap(torch.atan2(forward[:, 1], forward[:, 0]).numpy())
+        return float(angle[-1] - angle[0])
+
+    assert turned(turning) == pytest.approx(1.0, abs=1e-4)
+    assert turned(mirror(turning)) == pytest.approx(-1.0, abs=1e-4)
+
+
 def test_loaded_foot_skating_counts_a_sliding_foot_and_not_a_pivoting_one():
     frames = 10
     soles = torch.zeros(frames, 4, 3)

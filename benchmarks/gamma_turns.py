@@ -1,0 +1,105 @@
+"""Left and right turns of GAMMA's prior and of the shipped policy (`motion-envs bench gamma-turns`).
+
+The prior is trained on every clip and its mirror image (`MarkerClips.from_dataset(..., mirrored=True)`), so
+it should turn left as often as right (`mirror` turns a left turn into a right one: tested). Two measurements,
+bodies from the env's start poses (1,024 for the prior, a quarter of that per policy row):
+
+- the prior under z ~ N(0, I): each body's heading change (`rewards.facing_direction`, + left) over the first
+  2 s and over the next 4 s, with the share turning more than 30° / 90° either way;
+- the shipped alpha = 1 policy (sampled latents) towards a goal 90° to the body's left or right, 4 or 12 m away:
+  the heading change over the first 6 s (a body that turns the long way round shows about +270° for a goal on
+  its right) and the share that reached the goal by 6 s and by 15 s (60 primitives).
+
+Writes `benchmarks/results/gamma_turns.md`.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from agents.controllers import PolicyLatent
+from benchmarks.machine import machine_line
+from motion_envs.atomic import atomic_write
+from motion_envs.envs.gamma_reach import GammaReachConfig, GammaReachCore, GammaReachState
+from motion_envs.priors.training import WEIGHTS_DIR
+from motion_envs.rewards import facing_direction
+
+RESULTS = Path(__file__).resolve().parent / "results"
+POLICY = WEIGHTS_DIR / "ppo_gammareach_alpha1_paper.zip"
+PRIMITIVES_PER_SECOND = 4
+
+
+def heading(state: GammaReachState) -> torch.Tensor:
+    """(N,) radians: the facing direction on the ground at the last frame of the latest primitive."""
+    forward = facing_direction(state.seed.joints[:, -1])
+    return torch.atan2(forward[:, 1], forward[:, 0])
+
+
+def starts(core: GammaReachCore, count: int, seed: int, bearing: torch.Tensor | None = None,
+           distance: torch.Tensor | None = None) -> GammaReachState:  # fmt: skip
+    """`count` bodies from random start poses and facings; goals at `bearing` (N,) radians from each body's
+    measured facing (+ left) and `distance` (N,) m, or 50 m ahead when not given."""
+    rng = np.random.default_rng(seed)
+    facing = torch.as_tensor(rng.uniform(-math.pi, math.pi, count), dtype=torch.float32)
+    rows = torch.as_tensor(rng.integers(0, core.num_starts, count))
+    placed = core.initial_state(rows, facing, torch.zeros(count, 2))
+    bearing = torch.zeros(count) if bearing is None else bearing
+    distance = torch.full((count,), 50.0) if distance is None else distance
+    direction = heading(placed) + bearing
+    pelvis = placed.seed.joints[:, -1, 0, :2]
+    goal = pelvis + distance[:, None] * torch.stack([direction.cos(), direction.sin()], dim=1)
+    return core.initial_state(rows, facing, goal)
+
+
+def turned(core: GammaReachCore, state: GammaReachState, act, primitives: int) -> tuple[torch.Tensor, torch.Tensor, GammaReachState]:
+    """Heading change (N,) radians (+ left) and reached flags (N,) over `primitives` steps of `act(state)`."""
+    previous, total = heading(state), torch.zeros(state.num_bodies)
+    reached = torch.zeros(state.num_bodies, dtype=torch.bool)
+    for _ in range(primitives):
+        state, result = core.step(state, act(state))
+        now = heading(state)
+        total += torch.remainder(now - previous + math.pi, 2 * math.pi) - math.pi
+        previous, reached = now, reached | result.reached.cpu()
+    return total, reached, state
+
+
+def shares(degrees: np.ndarray) -> str:
+    """Table cells: median, left > 30°, right > 30°, left > 90°, right > 90°."""
+    return (f"{np.median(degrees):+.0f}° | {np.mean(degrees > 30):.2f} | {np.mean(degrees < -30):.2f} "
+            f"| {np.mean(degrees > 90):.2f} | {np.mean(degrees < -90):.2f}")  # fmt: skip
+
+
+def main(bodies: int = 1024, seed: int = 0) -> int:
+    began = time.perf_counter()
+    torch.manual_seed(seed)
+    core = GammaReachCore(GammaReachConfig(terminate_on_goal=False))
+    state = starts(core, bodies, seed)
+    first, _, state = turned(core, state, lambda s: torch.randn(s.num_bodies, 128), 2 * PRIMITIVES_PER_SECOND)
+    later, _, _ = turned(core, state, lambda s: torch.randn(s.num_bodies, 128), 4 * PRIMITIVES_PER_SECOND)
+    lines = ["# GAMMA's turns, left and right", "", "\n\n".join(__doc__.split("\n\n")[1:3]).strip(), "",
+             "| latents | seconds | median heading change (+ left) | left > 30° | right > 30° | left > 90° | right > 90° |",
+             "|---|---|---|---|---|---|---|",
+             f"| z ~ N(0, I) | 0-2 | {shares(np.degrees(first.numpy()))} |",
+             f"| z ~ N(0, I) | 2-6 | {shares(np.degrees(later.numpy()))} |", "",
+             "| policy, goal | bodies | heading change over 6 s (+ left) | left > 30° | right > 30° | left > 90° | "
+             "right > 90° | reached by 6 s | reached by 15 s |", "|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+    policy = PolicyLatent(POLICY, seed=seed)
+    for side, sign in (("left", 1.0), ("right", -1.0)):
+        for distance in (4.0, 12.0):
+            count = bodies // 4
+            state = starts(core, count, seed + 1, torch.full((count,), sign * math.pi / 2), torch.full((count,), distance))
+            change, early, state = turned(core, state, lambda s: policy(core, s), 6 * PRIMITIVES_PER_SECOND)
+            _, late, _ = turned(core, state, lambda s: policy(core, s), 9 * PRIMITIVES_PER_SECOND)
+            lines.append(f"| alpha = 1, 90° {side}, {distance:.0f} m | {count} | {shares(np.degrees(change.numpy()))} "
+                         f"| {early.float().mean():.2f} | {(early | late).float().mean():.2f} |")  # fmt: skip
+    lines += ["", machine_line(), f"Command: `motion-envs bench gamma-turns`; {time.perf_counter() - began:.0f} s.", ""]
+    text = "\n".join(lines)
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    atomic_write(RESULTS / "gamma_turns.md", lambda file: file.write(text.encode()))
+    print(text)
+    return 0

@@ -1,11 +1,13 @@
 """Left and right turns of GAMMA's prior and of the shipped policy (`motion-envs bench gamma-turns`).
 
 The prior is trained on every clip and its mirror image (`MarkerClips.from_dataset(..., mirrored=True)`), so
-it should turn left as often as right (`mirror` turns a left turn into a right one: tested). Two measurements,
+it should turn left as often as right (`mirror` turns a left turn into a right one: tested). Three measurements,
 bodies from the env's start poses (1,024 for the prior, a quarter of that per policy row):
 
 - the prior under z ~ N(0, I): each body's heading change (`rewards.facing_direction`, + left) over the first
   2 s and over the next 4 s, with the share turning more than 30° / 90° either way;
+- one primitive of the prior's mean (z = 0) seeded with held-out data windows and with their mirror images,
+  against how the data goes on (`one_primitive_turns`);
 - the shipped alpha = 1 policy (sampled latents) towards a goal 90° to the body's left or right, 4 or 12 m away:
   the heading change over the first 6 s (a body that turns the long way round shows about +270° for a goal on
   its right) and the share that reached the goal by 6 s and by 15 s (60 primitives).
@@ -25,7 +27,13 @@ import torch
 from agents.controllers import PolicyLatent
 from benchmarks.machine import machine_line
 from motion_envs.atomic import atomic_write
+from motion_envs.body.rotations import matrix_to_sixd, rotation_matrix
+from motion_envs.data.mirror import mirror
+from motion_envs.data.motion import BodyMotion
+from motion_envs.data.primitives import GAMMA_FPS
+from motion_envs.data.start_poses import load_start_poses
 from motion_envs.envs.gamma_reach import GammaReachConfig, GammaReachCore, GammaReachState
+from motion_envs.priors.gamma_generator import GammaGenerator, GammaSeed
 from motion_envs.priors.training import WEIGHTS_DIR
 from motion_envs.rewards import facing_direction
 
@@ -68,6 +76,31 @@ def turned(core: GammaReachCore, state: GammaReachState, act, primitives: int) -
     return total, reached, state
 
 
+def one_primitive_turns(generator: GammaGenerator, mirrored: bool) -> tuple[float, float]:
+    """Mean heading change (degrees, + left) from the second to the last frame of the start windows (W, 10 frames
+    of held-out data), as the data goes on and as the prior's mean primitive (z = 0, seeded with the windows'
+    first two frames, no floor or foot rule) goes on; `mirrored`: the windows' mirror images."""
+    starts = load_start_poses(GAMMA_FPS)
+    windows = [BodyMotion("start", "data", GAMMA_FPS, *(starts[name][row] for name in ("transl", "global_orient", "body_pose")))
+               for row in range(len(starts["transl"]))]  # fmt: skip
+    windows = [mirror(window) if mirrored else window for window in windows]
+    transl, orient, pose = (torch.as_tensor(np.stack([getattr(w, name) for w in windows]), dtype=torch.float32)
+                            for name in ("transl", "global_orient", "body_pose"))  # fmt: skip
+    orient, pose = matrix_to_sixd(rotation_matrix(orient)), matrix_to_sixd(rotation_matrix(pose))
+    joints, markers = generator.markers_of(transl, orient, pose)  # (W, 10, ...)
+    count = len(transl)
+    seed = GammaSeed(torch.full((count,), 2), markers[:, :2], markers[:, :2], joints[:, :2], transl[:, :2], orient[:, :2],
+                     pose[:, :2])  # fmt: skip
+    primitive, _ = generator.step(seed, torch.zeros(count, generator.latent_size))
+
+    def change(end: torch.Tensor) -> float:
+        forward_end, forward_start = facing_direction(end), facing_direction(joints[:, 1])
+        angle = torch.atan2(forward_end[:, 1], forward_end[:, 0]) - torch.atan2(forward_start[:, 1], forward_start[:, 0])
+        return math.degrees(float((torch.remainder(angle + math.pi, 2 * math.pi) - math.pi).mean()))
+
+    return change(joints[:, -1]), change(primitive.joints[:, -1])
+
+
 def shares(degrees: np.ndarray) -> str:
     """Table cells: median, left > 30°, right > 30°, left > 90°, right > 90°."""
     return (f"{np.median(degrees):+.0f}° | {np.mean(degrees > 30):.2f} | {np.mean(degrees < -30):.2f} "
@@ -85,9 +118,16 @@ def main(bodies: int = 1024, seed: int = 0) -> int:
              "| latents | seconds | median heading change (+ left) | left > 30° | right > 30° | left > 90° | right > 90° |",
              "|---|---|---|---|---|---|---|",
              f"| z ~ N(0, I) | 0-2 | {shares(np.degrees(first.numpy()))} |",
-             f"| z ~ N(0, I) | 2-6 | {shares(np.degrees(later.numpy()))} |", "",
-             "| policy, goal | bodies | heading change over 6 s (+ left) | left > 30° | right > 30° | left > 90° | "
-             "right > 90° | reached by 6 s | reached by 15 s |", "|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+             f"| z ~ N(0, I) | 2-6 | {shares(np.degrees(later.numpy()))} |"]  # fmt: skip
+    lines += ["", "One primitive (8 new frames, 0.2 s) of the prior's mean (z = 0) from the 48 held-out start windows' first "
+              "two frames, against how the data goes on, and the same for the windows' mirror images: a prior that "
+              "treats left and right alike turns the mirrored seeds by minus what it turns the originals.", "",
+              "| seeds | data's turn (+ left) | prior's turn, z = 0 | prior minus data |", "|---|---|---|---|"]  # fmt: skip
+    for label, mirrored in (("held-out windows", False), ("their mirror images", True)):
+        data, prior = one_primitive_turns(core.generator, mirrored)
+        lines.append(f"| {label} | {data:+.2f}° | {prior:+.2f}° | {prior - data:+.2f}° |")
+    lines += ["", "| policy, goal | bodies | heading change over 6 s (+ left) | left > 30° | right > 30° | left > 90° | "
+              "right > 90° | reached by 6 s | reached by 15 s |", "|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
     policy = PolicyLatent(POLICY, seed=seed)
     for side, sign in (("left", 1.0), ("right", -1.0)):
         for distance in (4.0, 12.0):

@@ -73,7 +73,8 @@ of the goal on the ground; the episode terminates there when
 `gym.make("motion_envs/GammaReach-v0", **kwargs)` with any field of
 `GammaReachConfig`; `reward` may be "paper", "release" or a `RewardConfig`.
 `reset(options=...)` takes `goal` ((x, y) metres), `start_index` (row of the
-start poses) and `facing` (radians).
+start poses) and `facing` (radians: a turn of the stored start pose, which faces about
++y; the body then faces about `facing` + π/2 from +x).
 
 ## Batched core and state
 
@@ -243,8 +244,10 @@ class GammaReachCore:
 
     def initial_state(self, start_index: torch.Tensor, facing: torch.Tensor, goal_xy: torch.Tensor,
                       start_xy: torch.Tensor | None = None) -> GammaReachState:  # fmt: skip
-        """Bodies from start rows (N,) turned to `facing` (N,) radians about the pelvis, pelvis over `start_xy`
-        (N, 2) (default (0, 0)); goals (N, 2) on the ground."""
+        """Bodies from start rows (N,) turned by `facing` (N,) radians about the vertical through the pelvis, pelvis
+        over `start_xy` (N, 2) (default (0, 0)); goals (N, 2) on the ground. The stored start poses face about +y
+        (forward, `rewards.facing_direction`, at a median 91° from +x, 68-133° over the 48 rows), so a body faces
+        about `facing` + π/2 (`benchmarks.gamma_turns.starts` aims goals by the measured forward)."""
         start_index, facing, goal_xy = (value.to(self.device) for value in (start_index, facing, goal_xy))
         if (start_index < 0).any() or (start_index >= self.num_starts).any():
             raise ValueError(f"start_index must lie in [0, {self.num_starts}), got {start_index.tolist()}")

@@ -27,7 +27,7 @@ import torch
 from agents.controllers import PolicyLatent
 from benchmarks.machine import machine_line
 from motion_envs.atomic import atomic_write
-from motion_envs.body.rotations import matrix_to_sixd, rotation_matrix
+from motion_envs.body.rotations import matrix_to_sixd, rotation_matrix, wrap_angle
 from motion_envs.data.mirror import mirror
 from motion_envs.data.motion import BodyMotion
 from motion_envs.data.primitives import GAMMA_FPS
@@ -42,10 +42,15 @@ POLICY = WEIGHTS_DIR / "ppo_gammareach_alpha1_paper.zip"
 PRIMITIVES_PER_SECOND = 4
 
 
-def heading(state: GammaReachState) -> torch.Tensor:
-    """(N,) radians: the facing direction on the ground at the last frame of the latest primitive."""
-    forward = facing_direction(state.seed.joints[:, -1])
+def facing_yaw(joints: torch.Tensor) -> torch.Tensor:
+    """(N, 22, 3) joints -> (N,) radians from +x of the body's forward on the ground (`rewards.facing_direction`)."""
+    forward = facing_direction(joints)
     return torch.atan2(forward[:, 1], forward[:, 0])
+
+
+def heading(state: GammaReachState) -> torch.Tensor:
+    """(N,) radians: the facing direction at the last frame of the latest primitive."""
+    return facing_yaw(state.seed.joints[:, -1])
 
 
 def starts(core: GammaReachCore, count: int, seed: int, bearing: torch.Tensor | None = None,
@@ -71,19 +76,22 @@ def turned(core: GammaReachCore, state: GammaReachState, act, primitives: int) -
     for _ in range(primitives):
         state, result = core.step(state, act(state))
         now = heading(state)
-        total += torch.remainder(now - previous + math.pi, 2 * math.pi) - math.pi
+        total += wrap_angle(now - previous)
         previous, reached = now, reached | result.reached.cpu()
     return total, reached, state
 
 
-def one_primitive_turns(generator: GammaGenerator, mirrored: bool) -> tuple[float, float]:
-    """Mean heading change (degrees, + left) from the second to the last frame of the start windows (W, 10 frames
-    of held-out data), as the data goes on and as the prior's mean primitive (z = 0, seeded with the windows'
-    first two frames, no floor or foot rule) goes on; `mirrored`: the windows' mirror images."""
-    starts = load_start_poses(GAMMA_FPS)
-    windows = [BodyMotion("start", "data", GAMMA_FPS, *(starts[name][row] for name in ("transl", "global_orient", "body_pose")))
-               for row in range(len(starts["transl"]))]  # fmt: skip
-    windows = [mirror(window) if mirrored else window for window in windows]
+def start_windows() -> list[BodyMotion]:
+    """The env's start windows (10 frames of held-out data each) as motions."""
+    poses = load_start_poses(GAMMA_FPS)
+    return [BodyMotion("start", "data", GAMMA_FPS, *(poses[name][row] for name in ("transl", "global_orient", "body_pose")))
+            for row in range(len(poses["transl"]))]  # fmt: skip
+
+
+def one_primitive_turns(generator: GammaGenerator, windows: list[BodyMotion]) -> tuple[float, float]:
+    """Mean heading change (degrees, + left) from the second to the last frame of `windows` (10 frames each), as
+    the data goes on and as the prior's mean primitive (z = 0, seeded with the windows' first two frames, no
+    floor or foot rule) goes on."""
     transl, orient, pose = (torch.as_tensor(np.stack([getattr(w, name) for w in windows]), dtype=torch.float32)
                             for name in ("transl", "global_orient", "body_pose"))  # fmt: skip
     orient, pose = matrix_to_sixd(rotation_matrix(orient)), matrix_to_sixd(rotation_matrix(pose))
@@ -94,9 +102,7 @@ def one_primitive_turns(generator: GammaGenerator, mirrored: bool) -> tuple[floa
     primitive, _ = generator.step(seed, torch.zeros(count, generator.latent_size))
 
     def change(end: torch.Tensor) -> float:
-        forward_end, forward_start = facing_direction(end), facing_direction(joints[:, 1])
-        angle = torch.atan2(forward_end[:, 1], forward_end[:, 0]) - torch.atan2(forward_start[:, 1], forward_start[:, 0])
-        return math.degrees(float((torch.remainder(angle + math.pi, 2 * math.pi) - math.pi).mean()))
+        return math.degrees(float(wrap_angle(facing_yaw(end) - facing_yaw(joints[:, 1])).mean()))
 
     return change(joints[:, -1]), change(primitive.joints[:, -1])
 
@@ -112,8 +118,11 @@ def main(bodies: int = 1024, seed: int = 0) -> int:
     torch.manual_seed(seed)
     core = GammaReachCore(GammaReachConfig(terminate_on_goal=False))
     state = starts(core, bodies, seed)
-    first, _, state = turned(core, state, lambda s: torch.randn(s.num_bodies, 128), 2 * PRIMITIVES_PER_SECOND)
-    later, _, _ = turned(core, state, lambda s: torch.randn(s.num_bodies, 128), 4 * PRIMITIVES_PER_SECOND)
+    def normal(state: GammaReachState) -> torch.Tensor:
+        return torch.randn(state.num_bodies, core.generator.latent_size)
+
+    first, _, state = turned(core, state, normal, 2 * PRIMITIVES_PER_SECOND)
+    later, _, _ = turned(core, state, normal, 4 * PRIMITIVES_PER_SECOND)
     lines = ["# GAMMA's turns, left and right", "", "\n\n".join(__doc__.split("\n\n")[1:3]).strip(), "",
              "| latents | seconds | median heading change (+ left) | left > 30° | right > 30° | left > 90° | right > 90° |",
              "|---|---|---|---|---|---|---|",
@@ -123,8 +132,9 @@ def main(bodies: int = 1024, seed: int = 0) -> int:
               "two frames, against how the data goes on, and the same for the windows' mirror images: a prior that "
               "treats left and right alike turns the mirrored seeds by minus what it turns the originals.", "",
               "| seeds | data's turn (+ left) | prior's turn, z = 0 | prior minus data |", "|---|---|---|---|"]  # fmt: skip
-    for label, mirrored in (("held-out windows", False), ("their mirror images", True)):
-        data, prior = one_primitive_turns(core.generator, mirrored)
+    windows = start_windows()
+    for label, seeds in (("held-out windows", windows), ("their mirror images", [mirror(w) for w in windows])):
+        data, prior = one_primitive_turns(core.generator, seeds)
         lines.append(f"| {label} | {data:+.2f}° | {prior:+.2f}° | {prior - data:+.2f}° |")
     lines += ["", "| policy, goal | bodies | heading change over 6 s (+ left) | left > 30° | right > 30° | left > 90° | "
               "right > 90° | reached by 6 s | reached by 15 s |", "|---|---|---|---|---|---|---|---|---|"]  # fmt: skip

@@ -7,7 +7,8 @@ bodies from the env's start poses (1,024 for the prior, a quarter of that per po
 - the prior under z ~ N(0, I): each body's heading change (`rewards.facing_direction`, + left) over the first
   2 s and over the next 4 s, with the share turning more than 30° / 90° either way;
 - one primitive of the prior's mean (z = 0) seeded with held-out data windows and with their mirror images,
-  against how the data goes on (`one_primitive_turns`);
+  against how the data goes on (`one_primitive_turns`), and the same over every training window of the prior,
+  each stage on its own (`training_window_turns`; needs the mocap folder);
 - the shipped alpha = 1 policy (sampled latents) towards a goal 90° to the body's left or right, 4 or 12 m away:
   the heading change over the first 6 s (a body that turns the long way round shows about +270° for a goal on
   its right) and the share that reached the goal by 6 s and by 15 s (60 primitives).
@@ -28,9 +29,13 @@ from agents.controllers import PolicyLatent
 from benchmarks.machine import machine_line
 from motion_envs.atomic import atomic_write
 from motion_envs.body.rotations import matrix_to_sixd, rotation_matrix, wrap_angle
+from motion_envs.data.build import build
+from motion_envs.data.dataset import MotionDataset
+from motion_envs.data.paths import SHIPPED_SUBSETS, default_mocap_dir
+from motion_envs.data.primitives import MarkerClips
 from motion_envs.data.mirror import mirror
 from motion_envs.data.motion import BodyMotion
-from motion_envs.data.primitives import GAMMA_FPS
+from motion_envs.data.primitives import GAMMA_FPS, PRIMITIVE_FRAMES
 from motion_envs.data.start_poses import load_start_poses
 from motion_envs.envs.gamma_reach import GammaReachConfig, GammaReachCore, GammaReachState
 from motion_envs.priors.gamma_generator import GammaGenerator, GammaSeed
@@ -107,6 +112,46 @@ def one_primitive_turns(generator: GammaGenerator, windows: list[BodyMotion]) ->
     return change(joints[:, -1]), change(primitive.joints[:, -1])
 
 
+def training_window_turns(generator: GammaGenerator, clips: MarkerClips, stride: int = 4) -> list[tuple[str, torch.Tensor]]:
+    """Heading changes (W,) degrees (+ left) from the second to the last frame of every 10-frame training window
+    (`stride` apart; canonical, as the predictor trains on them): the data's; the bodies the regressor makes of
+    the data's own markers (the regressor alone); the 2-frame predictor's mean primitive (z = 0) from the data's
+    first two frames, read as the generator reads it, through the regressor (predictor and regressor)."""
+    windows = clips.windows(clips.window_starts(PRIMITIVE_FRAMES, stride), PRIMITIVE_FRAMES)
+
+    def change(new_joints: torch.Tensor) -> torch.Tensor:  # (W, 8, 22, 3) -> (W,)
+        return torch.rad2deg(wrap_angle(facing_yaw(new_joints[:, -1]) - facing_yaw(windows.joints[:, 1])))
+
+    def regressed(markers: torch.Tensor) -> torch.Tensor:  # (W, 8, 67, 3) -> joints (W, 8, 22, 3)
+        body = generator.regressor(markers)
+        return generator.body.from_matrices(body["transl"], rotation_matrix(body["global_orient"]),
+                                            rotation_matrix(body["body_pose"])).joints  # fmt: skip
+
+    seed = windows.markers[:, :2].flatten(2)
+    predicted = generator.predictor_2f.decode(seed, seed.new_zeros(len(seed), generator.latent_size)).unflatten(-1, (-1, 3))
+    return [("the data", change(windows.joints[:, 2:])), ("the regressor, from the data's markers", change(regressed(windows.markers[:, 2:]))),
+            ("the predictor (z = 0) and the regressor", change(regressed(predicted)))]  # fmt: skip
+
+
+def training_window_lines(generator: GammaGenerator) -> list[str]:
+    """The table of `training_window_turns` on the shipped data's training split (mirror images included,
+    as the prior trains), or a line saying why there is none."""
+    mocap = default_mocap_dir()
+    if mocap is None:
+        return ["No mocap folder (`MOTION_ENVS_DATA` or `../shared/mocap`): the training-window rows are skipped."]
+    dataset = MotionDataset.load(build(mocap, subsets=SHIPPED_SUBSETS, fps_list=(GAMMA_FPS,), progress=False).caches[GAMMA_FPS])
+    clips = MarkerClips.from_dataset(dataset, "train", generator.body, mirrored=True)
+    turns = training_window_turns(generator, clips)
+    lines = [f"Every 10-frame window of the prior's training split ({len(turns[0][1]):,}, every 4th frame, "
+             f"`{dataset.path.stem}`, mirror images included): the heading change from the second to the last frame, "
+             "each stage of the generator on its own (`training_window_turns`). The data turn left and right alike; "
+             "a bias here is the network's, on windows it was trained on.", "",
+             "| heading change of | mean (+ left) | left > 10° | right > 10° |", "|---|---|---|---|"]  # fmt: skip
+    for label, degrees in turns:
+        lines.append(f"| {label} | {degrees.mean():+.2f}° | {(degrees > 10).float().mean():.3f} | {(degrees < -10).float().mean():.3f} |")
+    return lines
+
+
 def shares(degrees: np.ndarray) -> str:
     """Table cells: median, left > 30°, right > 30°, left > 90°, right > 90°."""
     return (f"{np.median(degrees):+.0f}° | {np.mean(degrees > 30):.2f} | {np.mean(degrees < -30):.2f} "
@@ -136,6 +181,7 @@ def main(bodies: int = 1024, seed: int = 0) -> int:
     for label, seeds in (("held-out windows", windows), ("their mirror images", [mirror(w) for w in windows])):
         data, prior = one_primitive_turns(core.generator, seeds)
         lines.append(f"| {label} | {data:+.2f}° | {prior:+.2f}° | {prior - data:+.2f}° |")
+    lines += ["", *training_window_lines(core.generator)]
     lines += ["", "| policy, goal | bodies | heading change over 6 s (+ left) | left > 30° | right > 30° | left > 90° | "
               "right > 90° | reached by 6 s | reached by 15 s |", "|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
     policy = PolicyLatent(POLICY, seed=seed)

@@ -509,7 +509,7 @@ def parser() -> argparse.ArgumentParser:
         dest="action", required=True
     )
     build = data.add_parser("build", help="retarget every clip to the body and cache it (npz per fps)")
-    _add_data_args(build, None)
+    _add_data_args(build, list(SHIPPED_SUBSETS))  # the clips `train` and `bench` read, so their cache is this one
     build.add_argument("--fps", type=int, nargs="+", default=[30, 40])
     build.add_argument("--quiet", action="store_true", help="no progress bar")
     build.add_argument("--no-cleanup", action="store_true",

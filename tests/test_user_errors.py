@@ -256,7 +256,8 @@ def test_next_step_autoreset_works_under_gymnasiums_normalize_observation():
 
 def test_train_defaults_follow_the_env_and_mocap_dir_means_the_clips_folder(tmp_path):
     """`train ppo --env WandrReach-v0` failed without `--reward default`; `train` wanted a cmu/ subfolder that
-    `data build` did not."""
+    `data build` did not; `data build` then read the whole folder (HDM05 too) where `train` reads the shipped
+    subfolders, so a user who built first retargeted again when training."""
     from agents.train_ppo import PPOTrainConfig
     from motion_envs.cli import _subsets, parser
 
@@ -268,7 +269,9 @@ def test_train_defaults_follow_the_env_and_mocap_dir_means_the_clips_folder(tmp_
     flat = tmp_path / "flat"
     flat.mkdir()
     assert _subsets(parser().parse_args(["train", "gamma", "--mocap-dir", str(flat)])) == ()  # the whole folder
-    assert _subsets(parser().parse_args(["data", "build", "--mocap-dir", str(tmp_path)])) == ()
+    for command in (["data", "build"], ["train", "gamma"], ["bench", "data"]):  # one cache for all of them
+        assert _subsets(parser().parse_args([*command, "--mocap-dir", str(tmp_path)])) == ("cmu",)
+    assert _subsets(parser().parse_args(["data", "build", "--mocap-dir", str(flat)])) == ()
 
 
 def test_train_threads_below_one_is_refused_before_anything_runs(capsys):

@@ -32,10 +32,9 @@ from motion_envs.body.rotations import matrix_to_sixd, rotation_matrix, wrap_ang
 from motion_envs.data.build import build
 from motion_envs.data.dataset import MotionDataset
 from motion_envs.data.paths import SHIPPED_SUBSETS, default_mocap_dir
-from motion_envs.data.primitives import MarkerClips
 from motion_envs.data.mirror import mirror
 from motion_envs.data.motion import BodyMotion
-from motion_envs.data.primitives import GAMMA_FPS, PRIMITIVE_FRAMES
+from motion_envs.data.primitives import GAMMA_FPS, PRIMITIVE_FRAMES, MarkerClips
 from motion_envs.data.start_poses import load_start_poses
 from motion_envs.envs.gamma_reach import GammaReachConfig, GammaReachCore, GammaReachState
 from motion_envs.priors.gamma_generator import GammaGenerator, GammaSeed

@@ -43,11 +43,17 @@ def _walking_motion(mocap_dir, body, fps: int):
 
 
 @pytest.fixture(scope="session")
-def walking_clips(mocap_dir, body):
-    """One real CMU walking clip (07_01) as 40 fps markers."""
+def walking_motion_40fps(mocap_dir, body):
+    """One real CMU walking clip (07_01) as body motion at 40 fps (GAMMA's rate)."""
+    return _walking_motion(mocap_dir, body, 40)
+
+
+@pytest.fixture(scope="session")
+def walking_clips(walking_motion_40fps, body):
+    """The same clip as 40 fps markers."""
     from motion_envs.data.primitives import MarkerClips
 
-    return MarkerClips.from_motions([_walking_motion(mocap_dir, body, 40)], body)
+    return MarkerClips.from_motions([walking_motion_40fps], body)
 
 
 @pytest.fixture(scope="session")

@@ -134,6 +134,8 @@ class GammaWanderConfig:
     upright_head: float = UPRIGHT_HEAD
     skating: float = 0.0
     """Per frame and m/s that the loaded heel or toe slides on the floor: `GammaReachConfig.skating` (0: off)."""
+    heading_calibration: bool = False
+    """The prior's heading calibration: `GammaReachConfig.heading_calibration` (off: the shipped policies')."""
     reward: RewardConfig = dataclasses.field(default_factory=RewardConfig.paper)
     start_kind: str = "any"
     latent_bound: float = 4.0
@@ -185,6 +187,7 @@ class GammaWanderConfig:
                                 start_kind=self.start_kind, latent_bound=self.latent_bound, terminate_on_goal=False,
                                 weights_dir=self.weights_dir, device=self.device, ground_feet=self.ground_feet,
                                 lock_feet=self.lock_feet, precision=self.precision, stooping=self.stooping,
+                                heading_calibration=self.heading_calibration,
                                 upright_head=self.upright_head, skating=self.skating)  # fmt: skip
 
 

@@ -37,6 +37,11 @@ and N latent codes and, batched over bodies:
    prior, which the realism benchmarks measure too;
 7. returns the primitive (world) and the next seed: its last two frames.
 
+With `set_heading_calibration(True)` each predicted frame's markers are first turned about their centroid by
+minus the predictor's measured heading bias at that frame (`motion_envs.priors.gamma_heading`: each trained
+predictor turns its bodies 1-2° per primitive one way, and the hip-based canonical frame compounds it into
+whole turns). Off by default: every shipped policy was trained on the uncorrected prior.
+
 Seed frames are part of every primitive (frames 0..S-1), so a primitive always
 has 10 frames; the 10 - S after the seed are new.
 
@@ -67,6 +72,7 @@ from motion_envs.body.rotations import matrix_to_sixd, rotation_matrix
 from motion_envs.data.primitives import GAMMA_FPS, PRIMITIVE_FRAMES
 from motion_envs.body.canonical_frame import CanonicalFrame, canonical_frame, goal_observation, to_canonical, to_world
 from motion_envs.priors.gamma import MarkerCVAE, PoseVAE, goal_conditioned_seed
+from motion_envs.priors.gamma_heading import CALIBRATION_FILE, HeadingCalibration, load_heading_calibration, rotate_about_centroids
 from motion_envs.priors.train_gamma import load_predictor
 from motion_envs.priors.train_pose_prior import load_pose_vae
 from motion_envs.priors.train_regressor import load_regressor
@@ -145,6 +151,26 @@ class GammaGenerator(torch.nn.Module):
         self.precision = "float32"
         self.register_buffer("leg_fit_slots", leg_fit_marker_slots(), persistent=False)
         self._copies: dict[tuple[str, int, torch.device], torch.nn.Module] = {}
+        self.calibration_path: Path | None = None
+        """The heading calibration file found beside the weights (`load`), read when it is turned on."""
+        self.heading_calibration: HeadingCalibration | None = None
+
+    def set_heading_calibration(self, on: bool) -> GammaGenerator:
+        """Turn the predictors' heading calibration (module doc) on or off; returns self.
+
+        Raises:
+            FileNotFoundError: on, and no calibration was found beside the weights (`load`).
+            CheckpointMismatchError: on, and the calibration was measured with other predictors or regressor.
+        """
+        if not on:
+            self.heading_calibration = None
+            return self
+        if self.calibration_path is None or not self.calibration_path.is_file():
+            raise FileNotFoundError(f"no heading calibration ({CALIBRATION_FILE}) beside these GAMMA weights; measure "
+                                    "one with: motion-envs train gamma --stage heading")  # fmt: skip
+        networks = {"predictor_1f": self.predictor_1f, "predictor_2f": self.predictor_2f, "regressor": self.regressor}
+        self.heading_calibration = load_heading_calibration(self.calibration_path, networks).to(self.device)
+        return self
 
     def set_precision(self, precision: str) -> GammaGenerator:
         """"float32" (default) or "bfloat16" for the networks (see the module doc); returns self."""
@@ -176,12 +202,14 @@ class GammaGenerator(torch.nn.Module):
     def load(cls, weights_dir: str | Path = WEIGHTS_DIR) -> GammaGenerator:
         """The shipped (or `weights_dir`'s) gamma_predictor_1f/2f, gamma_regressor and gamma_pose_vae."""
         weights_dir = Path(weights_dir)
-        return cls(
+        generator = cls(
             load_predictor(weights_dir / "gamma_predictor_1f.pt"),
             load_predictor(weights_dir / "gamma_predictor_2f.pt"),
             load_regressor(weights_dir / "gamma_regressor.pt"),
             load_pose_vae(weights_dir / "gamma_pose_vae.pt"),
         )
+        generator.calibration_path = weights_dir / CALIBRATION_FILE
+        return generator
 
     @property
     def latent_size(self) -> int:
@@ -256,6 +284,8 @@ class GammaGenerator(torch.nn.Module):
             condition = goal_conditioned_seed(state)[:, 2 - frames :]
         dtype = PRECISIONS[self.precision]
         future = self._network(model).decode(condition.to(dtype), z.to(dtype)).unflatten(-1, (-1, 3))  # (M, 10 - S, 67, 3)
+        if self.heading_calibration is not None:
+            future = rotate_about_centroids(future.float(), -self.heading_calibration.correction(model)).to(dtype)
         regressed = {name: value.float() for name, value in self._network("regressor")(future).items()}
         future = future.float()  # canonical coordinates
         transl = to_world(regressed["transl"], frame)

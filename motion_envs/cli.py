@@ -331,7 +331,7 @@ def _train(args: argparse.Namespace) -> int:
     if args.what == "dqn":
         return _train_dqn(args)
     stages = {"predictor": _train_gamma_predictor, "regressor": _train_gamma_regressor, "pose-vae": _train_gamma_pose_vae,
-              "g-cvae": _train_gamma_g_cvae}  # fmt: skip
+              "g-cvae": _train_gamma_g_cvae, "heading": _train_gamma_heading}  # fmt: skip
     if args.stage not in stages:
         print(f"unknown --stage {args.stage!r}; choose from {', '.join(stages)}", file=sys.stderr)
         return 2
@@ -466,6 +466,28 @@ def _train_gamma_g_cvae(args: argparse.Namespace, dataset, common: dict) -> dict
     return train_goal_cvae(_train_config(GoalCVAETrainConfig, common), windows("train", True), windows("validation", False))
 
 
+def _train_gamma_heading(args: argparse.Namespace, dataset, common: dict) -> dict:
+    """Measure the heading calibration of the predictors with the regressor (`motion_envs.priors.gamma_heading`)
+    on the training windows and write it (run folder, `--weights`, or beside the shipped weights with --ship)."""
+    from motion_envs.body import BodyModel
+    from motion_envs.priors.gamma_heading import CALIBRATION_FILE, CALIBRATION_KIND, measure_heading_calibration, network_fingerprints
+    from motion_envs.priors.train_gamma import load_predictor
+    from motion_envs.priors.train_regressor import load_regressor
+    from motion_envs.priors.training import WEIGHTS_DIR, ship, weights_destination
+
+    stride = args.window_stride or 4
+    paths = {name: getattr(args, name) or WEIGHTS_DIR / f"gamma_{name}.pt" for name in ("predictor_1f", "predictor_2f", "regressor")}
+    networks = {name: (load_regressor if name == "regressor" else load_predictor)(path) for name, path in paths.items()}
+    predictors = {name: networks[name] for name in ("predictor_1f", "predictor_2f")}
+    calibration, figures = measure_heading_calibration(predictors, networks["regressor"], BodyModel(),
+                                                       _marker_clips(dataset, "train", mirrored=True), stride)  # fmt: skip
+    entry = {"kind": CALIBRATION_KIND, "config": {}, "data_hash": common["data_hash"], "command": common["command"],
+             "window_stride": stride, "measured_with": {name: str(getattr(args, name) or f"shipped {path.name}") for name, path in paths.items()},
+             "fingerprints": network_fingerprints(networks), "validation_heading": figures}  # fmt: skip
+    weights = weights_destination(CALIBRATION_FILE, Path(args.run_dir or "runs/gamma_heading"), args.weights, args.ship)
+    return ship(calibration, weights, entry)
+
+
 def _train_gamma_pose_vae(args: argparse.Namespace, dataset, common: dict) -> dict:
     import numpy as np
     import torch
@@ -525,7 +547,12 @@ def parser() -> argparse.ArgumentParser:
     train.add_argument("--stages", default=None,
                        help="priors: comma-separated stages to run (default all; e.g. "
                             "wandr_short,wandr_60,wandr,clops_stage1,clops_stage2,clops)")
-    train.add_argument("--stage", default="predictor", help="gamma: predictor | regressor | pose-vae | g-cvae")
+    train.add_argument("--stage", default="predictor",
+                       help="gamma: predictor | regressor | pose-vae | g-cvae | heading (the predictors' heading "
+                            "calibration, measured on the training windows; motion_envs/priors/gamma_heading.py)")  # fmt: skip
+    for network in ("predictor-1f", "predictor-2f", "regressor"):
+        train.add_argument(f"--{network}", type=Path, default=None,
+                           help=f"gamma heading: the {network.replace('-', ' ')} weights to calibrate (default: the shipped ones)")  # fmt: skip
     train.add_argument("--seed-frames", type=int, default=2, choices=(1, 2), help="predictor: seed frames")
     train.add_argument("--epochs", type=int, default=None, help="epochs (predictor: single-primitive epochs)")
     train.add_argument("--rollout-epochs", type=int, default=None, help="predictor: 8-primitive rollout epochs after those")

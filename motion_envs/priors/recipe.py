@@ -14,7 +14,8 @@ mocap folder scales it roughly with its number of frames. The GAMMA predictors'
 stages are the run measured best on the cleaned data (8 single-primitive epochs,
 no rollout fine-tuning, no contact loss: random-latent FS 0.214 against the
 previous recipe's 25 + 3 epochs with the contact loss, 0.60); the previous
-recipe's 25 + 3 epochs without the contact loss was not tried on the cleaned data.
+recipe's 25 + 3 epochs without the contact loss was not tried on the cleaned data. `gamma_heading` measures the
+predictors' heading calibration with the regressor (`motion_envs.priors.gamma_heading`) on the same data.
 WANDR's prior is trained with rollouts of at most 10 frames (`wandr_short`), then fine-tuned with rollouts of up
 to 60 (`wandr_60`) and 120 frames (`wandr`): trained on 0.33 s of its own output only, it folded over within 15 s
 of sampled walking (trunk tilt 36° and growing, head 0.53 m over the 15th second of a walk towards a goal 20 m
@@ -80,6 +81,9 @@ RECIPE: tuple[Stage, ...] = (
           "gamma_predictor_2f.pt", 5),
     Stage("gamma_regressor", ("gamma", "--stage", "regressor", "--epochs", "46", "--batch-size", "16", "--window-stride", "4"),
           "gamma_regressor.pt", 20),
+    Stage("gamma_heading", ("gamma", "--stage", "heading", "--predictor-1f", "{gamma_predictor_1f}", "--predictor-2f",
+                            "{gamma_predictor_2f}", "--regressor", "{gamma_regressor}"), "gamma_heading_calibration.pt", 2,
+          needs=("gamma_predictor_1f", "gamma_predictor_2f", "gamma_regressor")),
     Stage("gamma_pose_vae", ("gamma", "--stage", "pose-vae", "--epochs", "20"), "gamma_pose_vae.pt", 1),
     Stage("gamma_g_cvae_2f", ("gamma", "--stage", "g-cvae", "--epochs", "12"), "gamma_g_cvae_2f.pt", None),
 )  # fmt: skip

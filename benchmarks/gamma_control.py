@@ -219,6 +219,8 @@ def per_body_table(rows: dict[str, dict], start: GammaReachState) -> list[str]:
 
 CLONED_CENTRE = ", KL to N(cloned, I)"
 """Label suffix of policies trained with `--kl-mean cloned` (`*_cloned.zip`)."""
+CALIBRATED_PRIOR = ", heading-calibrated prior"
+"""Label suffix of policies trained on the prior with its heading calibration (`--env-option heading_calibration=true`)."""
 
 
 def policy_label(path: Path) -> str:
@@ -228,7 +230,14 @@ def policy_label(path: Path) -> str:
     policy = read_policy_file(path)
     reward = (policy.trained_for.env_kwargs if policy.trained_for else {}).get("reward", "paper")
     return (f"policy({policy.alpha:g})" + ("" if reward == "paper" else f", {reward} reward")
-            + (CLONED_CENTRE if policy.kl_mean == "cloned" else ""))  # fmt: skip
+            + (CLONED_CENTRE if policy.kl_mean == "cloned" else "")
+            + (CALIBRATED_PRIOR if trained_with_heading_calibration(path) else ""))  # fmt: skip
+
+
+def trained_with_heading_calibration(path: Path) -> bool:
+    """Whether the policy in `path` was trained on the prior with its heading calibration (its env options)."""
+    trained = read_policy_file(path).trained_for
+    return bool(trained and trained.env_kwargs.get("heading_calibration"))
 
 
 BF16_CHECK = (20, 8)
@@ -256,6 +265,8 @@ class GammaRow:
     precision: str = "auto"
     weights_dir: str | None = None
     """The prior's folder (None: the shipped one)."""
+    heading_calibration: bool = False
+    """The prior's heading calibration on (`GammaReachConfig.heading_calibration`): as the policy was trained."""
 
     def __post_init__(self) -> None:
         if self.controller not in CONTROLLERS:
@@ -263,9 +274,9 @@ class GammaRow:
 
 
 @functools.lru_cache(maxsize=4)
-def cached_core(precision: str, goal_cvae: bool, weights_dir: str | None = None) -> GammaReachCore:
+def cached_core(precision: str, goal_cvae: bool, weights_dir: str | None = None, heading_calibration: bool = False) -> GammaReachCore:
     """One env core per process and setting (cores are stateless between rollouts; loading the prior is not free)."""
-    core = GammaReachCore(GammaReachConfig(precision=precision, weights_dir=weights_dir))
+    core = GammaReachCore(GammaReachConfig(precision=precision, weights_dir=weights_dir, heading_calibration=heading_calibration))
     if not goal_cvae:
         return core
     return GammaReachCore(GammaReachConfig(weights_dir=weights_dir), goal_cvae_generator(g_cvae_weights(weights_dir), core.generator))
@@ -279,7 +290,7 @@ def g_cvae_weights(weights_dir: str | None) -> Path:
 def run_shard(row: GammaRow, first: int, last: int, seed: int) -> dict:
     """Pairs [first, last) of the row (`Recorder.row`'s figures, plus the task's seconds)."""
     began = time.perf_counter()
-    core = cached_core(row.precision, row.controller == "g-cvae", row.weights_dir)
+    core = cached_core(row.precision, row.controller == "g-cvae", row.weights_dir, row.heading_calibration)
     start = fixed_pairs(core, range(first, last), seed)
     shard_seed = group_seed(seed, first)
     proposal = PolicyLatent(row.policy, seed=shard_seed) if row.controller == "policy" else RandomLatent(shard_seed)
@@ -338,11 +349,13 @@ def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False,
     policies = ({policy_label(path): path for path in shipped} if policies is None
                 else {f"{policy_label(path)} ({path})": path for path in policies})  # fmt: skip
     for label, path in policies.items():
-        runs[label] = row("policy", path, clones=clones)
-    searchers = {label: path for label, path in policies.items() if label in ("policy(10)", "policy(1)", "policy(10)" + CLONED_CENTRE)}
+        runs[label] = row("policy", path, clones=clones, heading_calibration=trained_with_heading_calibration(path))
+    searched = ("policy(10)", "policy(1)", "policy(10)" + CLONED_CENTRE)
+    searchers = {label: path for label, path in policies.items() if label.removesuffix(CALIBRATED_PRIOR) in searched}
     costs = (("", "release"), (", distance cost", "distance"))
     for (label, path), keep, (cost_name, cost) in itertools.product(searchers.items(), (1, 4), costs):
-        runs[f"{label} & top{keep}{cost_name}"] = row("policy", path, keep=keep, cost=cost)
+        runs[f"{label} & top{keep}{cost_name}"] = row("policy", path, keep=keep, cost=cost,
+                                                      heading_calibration=trained_with_heading_calibration(path))  # fmt: skip
     searcher = searchers.get("policy(10)")
     runs["random z & top4"] = row("random", keep=4)
     rows = run_rows(runs, pairs, seed, ray_address)

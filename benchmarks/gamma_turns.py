@@ -13,6 +13,10 @@ bodies from the env's start poses (1,024 for the prior, a quarter of that per po
   the heading change over the first 6 s (a body that turns the long way round shows about +270° for a goal on
   its right) and the share that reached the goal by 6 s and by 15 s (60 primitives).
 
+Each measurement of the prior is made as trained and with its heading calibration (`motion_envs.priors.
+gamma_heading`) when the weights have one; the policy rows run on the prior the policy was trained on (its env
+options) and, for comparison, on the other one.
+
 Writes `benchmarks/results/gamma_turns.md`.
 """
 
@@ -38,18 +42,12 @@ from motion_envs.data.primitives import GAMMA_FPS, PRIMITIVE_FRAMES, MarkerClips
 from motion_envs.data.start_poses import load_start_poses
 from motion_envs.envs.gamma_reach import GammaReachConfig, GammaReachCore, GammaReachState
 from motion_envs.priors.gamma_generator import GammaGenerator, GammaSeed
+from motion_envs.priors.gamma_heading import facing_yaw, regressed_joints, rotate_about_centroids
 from motion_envs.priors.training import WEIGHTS_DIR
-from motion_envs.rewards import facing_direction
 
 RESULTS = Path(__file__).resolve().parent / "results"
 POLICY = WEIGHTS_DIR / "ppo_gammareach_alpha1_paper.zip"
 PRIMITIVES_PER_SECOND = 4
-
-
-def facing_yaw(joints: torch.Tensor) -> torch.Tensor:
-    """(N, 22, 3) joints -> (N,) radians from +x of the body's forward on the ground (`rewards.facing_direction`)."""
-    forward = facing_direction(joints)
-    return torch.atan2(forward[:, 1], forward[:, 0])
 
 
 def heading(state: GammaReachState) -> torch.Tensor:
@@ -115,21 +113,24 @@ def training_window_turns(generator: GammaGenerator, clips: MarkerClips, stride:
     """Heading changes (W,) degrees (+ left) from the second to the last frame of every 10-frame training window
     (`stride` apart; canonical, as the predictor trains on them): the data's; the bodies the regressor makes of
     the data's own markers (the regressor alone); the 2-frame predictor's mean primitive (z = 0) from the data's
-    first two frames, read as the generator reads it, through the regressor (predictor and regressor)."""
+    first two frames, read as the generator reads it, through the regressor (predictor and regressor), and the same
+    heading-calibrated when the generator's calibration is on."""
     windows = clips.windows(clips.window_starts(PRIMITIVE_FRAMES, stride), PRIMITIVE_FRAMES)
 
     def change(new_joints: torch.Tensor) -> torch.Tensor:  # (W, 8, 22, 3) -> (W,)
         return torch.rad2deg(wrap_angle(facing_yaw(new_joints[:, -1]) - facing_yaw(windows.joints[:, 1])))
 
     def regressed(markers: torch.Tensor) -> torch.Tensor:  # (W, 8, 67, 3) -> joints (W, 8, 22, 3)
-        body = generator.regressor(markers)
-        return generator.body.from_matrices(body["transl"], rotation_matrix(body["global_orient"]),
-                                            rotation_matrix(body["body_pose"])).joints  # fmt: skip
+        return regressed_joints(generator.regressor, generator.body, markers)
 
     seed = windows.markers[:, :2].flatten(2)
     predicted = generator.predictor_2f.decode(seed, seed.new_zeros(len(seed), generator.latent_size)).unflatten(-1, (-1, 3))
-    return [("the data", change(windows.joints[:, 2:])), ("the regressor, from the data's markers", change(regressed(windows.markers[:, 2:]))),
+    rows = [("the data", change(windows.joints[:, 2:])), ("the regressor, from the data's markers", change(regressed(windows.markers[:, 2:]))),
             ("the predictor (z = 0) and the regressor", change(regressed(predicted)))]  # fmt: skip
+    if generator.heading_calibration is not None:
+        calibrated = rotate_about_centroids(predicted, -generator.heading_calibration.correction("predictor_2f"))
+        rows.append(("the same, heading-calibrated", change(regressed(calibrated))))
+    return rows
 
 
 def training_window_lines(generator: GammaGenerator) -> list[str]:
@@ -157,41 +158,75 @@ def shares(degrees: np.ndarray) -> str:
             f"| {np.mean(degrees > 90):.2f} | {np.mean(degrees < -90):.2f}")  # fmt: skip
 
 
-def main(bodies: int = 1024, seed: int = 0) -> int:
-    began = time.perf_counter()
-    torch.manual_seed(seed)
-    core = GammaReachCore(GammaReachConfig(terminate_on_goal=False))
-    state = starts(core, bodies, seed)
+def calibration_settings(generator: GammaGenerator) -> list[tuple[str, bool]]:
+    """(label, on) for the prior as trained and, where its weights have one, with its heading calibration."""
+    try:
+        generator.set_heading_calibration(True)
+    except FileNotFoundError:
+        return [("as trained", False)]
+    finally:
+        generator.set_heading_calibration(False)
+    return [("as trained", False), ("heading-calibrated", True)]
+
+
+def prior_lines(core: GammaReachCore, settings: list[tuple[str, bool]], bodies: int, seed: int) -> list[str]:
+    """The z ~ N(0, I) table and the held-out one-primitive table, one row per calibration setting."""
     def normal(state: GammaReachState) -> torch.Tensor:
         return torch.randn(state.num_bodies, core.generator.latent_size)
 
-    first, _, state = turned(core, state, normal, 2 * PRIMITIVES_PER_SECOND)
-    later, _, _ = turned(core, state, normal, 4 * PRIMITIVES_PER_SECOND)
-    lines = ["# GAMMA's turns, left and right", "", "\n\n".join(__doc__.split("\n\n")[1:3]).strip(), "",
-             "| latents | seconds | median heading change (+ left) | left > 30° | right > 30° | left > 90° | right > 90° |",
-             "|---|---|---|---|---|---|---|",
-             f"| z ~ N(0, I) | 0-2 | {shares(np.degrees(first.numpy()))} |",
-             f"| z ~ N(0, I) | 2-6 | {shares(np.degrees(later.numpy()))} |"]  # fmt: skip
-    lines += ["", "One primitive (8 new frames, 0.2 s) of the prior's mean (z = 0) from the 48 held-out start windows' first "
-              "two frames, against how the data goes on, and the same for the windows' mirror images: a prior that "
-              "treats left and right alike turns the mirrored seeds by minus what it turns the originals.", "",
-              "| seeds | data's turn (+ left) | prior's turn, z = 0 | prior minus data |", "|---|---|---|---|"]  # fmt: skip
-    windows = start_windows()
-    for label, seeds in (("held-out windows", windows), ("their mirror images", [mirror(w) for w in windows])):
-        data, prior = one_primitive_turns(core.generator, seeds)
-        lines.append(f"| {label} | {data:+.2f}° | {prior:+.2f}° | {prior - data:+.2f}° |")
-    lines += ["", *training_window_lines(core.generator)]
-    lines += ["", "| policy, goal | bodies | heading change over 6 s (+ left) | left > 30° | right > 30° | left > 90° | "
-              "right > 90° | reached by 6 s | reached by 15 s |", "|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+    latent_rows, window_rows = [], []
+    for label, on in settings:
+        core.generator.set_heading_calibration(on)
+        torch.manual_seed(seed)
+        first, _, state = turned(core, starts(core, bodies, seed), normal, 2 * PRIMITIVES_PER_SECOND)
+        later, _, _ = turned(core, state, normal, 4 * PRIMITIVES_PER_SECOND)
+        latent_rows += [f"| z ~ N(0, I), {label} | 0-2 | {shares(np.degrees(first.numpy()))} |",
+                        f"| z ~ N(0, I), {label} | 2-6 | {shares(np.degrees(later.numpy()))} |"]  # fmt: skip
+        windows = start_windows()
+        for kind, seeds in (("held-out windows", windows), ("their mirror images", [mirror(w) for w in windows])):
+            data, prior = one_primitive_turns(core.generator, seeds)
+            window_rows.append(f"| {kind}, {label} | {data:+.2f}° | {prior:+.2f}° | {prior - data:+.2f}° |")
+    core.generator.set_heading_calibration(False)
+    return ["| latents, prior | seconds | median heading change (+ left) | left > 30° | right > 30° | left > 90° | right > 90° |",
+            "|---|---|---|---|---|---|---|", *latent_rows, "",
+            "One primitive (8 new frames, 0.2 s) of the prior's mean (z = 0) from the 48 held-out start windows' first "
+            "two frames, against how the data goes on, and the same for the windows' mirror images: a prior that "
+            "treats left and right alike turns the mirrored seeds by minus what it turns the originals.", "",
+            "| seeds, prior | data's turn (+ left) | prior's turn, z = 0 | prior minus data |", "|---|---|---|---|", *window_rows]  # fmt: skip
+
+
+def policy_lines(core: GammaReachCore, settings: list[tuple[str, bool]], bodies: int, seed: int) -> list[str]:
+    """The alpha = 1 policy's rows towards goals 90° left and right, on each prior setting."""
     policy = PolicyLatent(POLICY, seed=seed)
-    for side, sign in (("left", 1.0), ("right", -1.0)):
-        for distance in (4.0, 12.0):
-            count = bodies // 4
-            state = starts(core, count, seed + 1, torch.full((count,), sign * math.pi / 2), torch.full((count,), distance))
-            change, early, state = turned(core, state, lambda s: policy(core, s), 6 * PRIMITIVES_PER_SECOND)
-            _, late, _ = turned(core, state, lambda s: policy(core, s), 9 * PRIMITIVES_PER_SECOND)
-            lines.append(f"| alpha = 1, 90° {side}, {distance:.0f} m | {count} | {shares(np.degrees(change.numpy()))} "
-                         f"| {early.float().mean():.2f} | {(early | late).float().mean():.2f} |")  # fmt: skip
+    trained = policy.file.trained_for
+    trained_on = bool(trained and trained.env_kwargs.get("heading_calibration"))
+    lines = ["| policy, prior, goal | bodies | heading change over 6 s (+ left) | left > 30° | right > 30° | left > 90° | "
+             "right > 90° | reached by 6 s | reached by 15 s |", "|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+    for label, on in sorted(settings, key=lambda setting: setting[1] != trained_on):
+        core.generator.set_heading_calibration(on)
+        prior = f"{label}{' (its own)' if on == trained_on else ''}"
+        for side, sign in (("left", 1.0), ("right", -1.0)):
+            for distance in (4.0, 12.0):
+                count = bodies // 4
+                state = starts(core, count, seed + 1, torch.full((count,), sign * math.pi / 2), torch.full((count,), distance))
+                change, early, state = turned(core, state, lambda s: policy(core, s), 6 * PRIMITIVES_PER_SECOND)
+                _, late, _ = turned(core, state, lambda s: policy(core, s), 9 * PRIMITIVES_PER_SECOND)
+                lines.append(f"| alpha = 1, {prior}, 90° {side}, {distance:.0f} m | {count} | "
+                             f"{shares(np.degrees(change.numpy()))} | {early.float().mean():.2f} | {(early | late).float().mean():.2f} |")  # fmt: skip
+    core.generator.set_heading_calibration(False)
+    return lines
+
+
+def main(bodies: int = 1024, seed: int = 0) -> int:
+    began = time.perf_counter()
+    core = GammaReachCore(GammaReachConfig(terminate_on_goal=False))
+    settings = calibration_settings(core.generator)
+    lines = ["# GAMMA's turns, left and right", "", "\n\n".join(__doc__.split("\n\n")[1:4]).strip(), "",
+             *prior_lines(core, settings, bodies, seed), ""]  # fmt: skip
+    core.generator.set_heading_calibration(len(settings) > 1)
+    lines += [*training_window_lines(core.generator), ""]
+    core.generator.set_heading_calibration(False)
+    lines += policy_lines(core, settings, bodies, seed)
     lines += ["", machine_line(), f"Command: `motion-envs bench gamma-turns`; {time.perf_counter() - began:.0f} s.", ""]
     text = "\n".join(lines)
     RESULTS.mkdir(parents=True, exist_ok=True)

@@ -4,7 +4,7 @@ Why: each trained predictor carries a small yaw bias of its own, of random sign,
 trained on, though the data (mirror images included) turn left and right alike: the shipped 2-frame
 predictor's mean primitive, read through the regressor, turns +2.17° per primitive where the data turn +0.01°;
 the same recipe with seeds 1 and 2 gives -1.32° and +1.15° (`motion-envs bench gamma-turns`, README). GAMMA
-recomputes its canonical frame from the hips at every primitive, so the bias compounds: under z ~ N(0, I) 83% of
+recomputes its canonical frame from the hips at every primitive, so the bias compounds: under z ~ N(0, I) 87% of
 the shipped prior's bodies turn more than 30° left within 2-6 s. Heading losses in training were tried and trade
 turning for the bias (the prior stops turning at all); training longer moves it about either way.
 

@@ -346,12 +346,12 @@ def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False,
     if g_cvae_weights(folder).exists():
         runs["g-CVAE"] = row("g-cvae", clones=clones)
     shipped = sorted(Path(weights_dir or WEIGHTS_DIR).glob("ppo_gammareach_*.zip"))
-    policies = ({policy_label(path): path for path in shipped} if policies is None
-                else {f"{policy_label(path)} ({path})": path for path in policies})  # fmt: skip
-    for label, path in policies.items():
+    evaluated = ({policy_label(path): path for path in shipped} if policies is None
+                 else {f"{policy_label(path)} ({path})": path for path in policies})  # fmt: skip
+    for label, path in evaluated.items():
         runs[label] = row("policy", path, clones=clones, heading_calibration=trained_with_heading_calibration(path))
     searched = ("policy(10)", "policy(1)", "policy(10)" + CLONED_CENTRE)
-    searchers = {label: path for label, path in policies.items() if label.removesuffix(CALIBRATED_PRIOR) in searched}
+    searchers = {label: path for label, path in evaluated.items() if label.removesuffix(CALIBRATED_PRIOR) in searched}
     costs = (("", "release"), (", distance cost", "distance"))
     for (label, path), keep, (cost_name, cost) in itertools.product(searchers.items(), (1, 4), costs):
         runs[f"{label} & top{keep}{cost_name}"] = row("policy", path, keep=keep, cost=cost,
@@ -380,8 +380,9 @@ def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False,
         "", *per_body_table(rows, start),
     ]  # fmt: skip
     lines += ["", f"The prior's networks ran in {core.generator.precision} (`precision=\"auto\"`: bf16 only on a CPU with "
-              f"native bf16, `motion_envs.precision`). Prior: {weights_dir or 'the shipped one'}; policies: "
-              f"{'the files named in the rows' if policies else weights_dir or 'the shipped ones'}."]  # fmt: skip
+              f"native bf16, `motion_envs.precision`). Prior: {weights_dir or 'the shipped one'}"
+              f"{', heading-calibrated in the rows that say so' if any(CALIBRATED_PRIOR in label for label in runs) else ''}; "
+              f"policies: {'the files named in the rows' if policies else weights_dir or 'the shipped ones'}."]  # fmt: skip
     if (bf16 or core.generator.precision == "bfloat16") and searcher is not None:
         check_pairs, check_clones = BF16_CHECK
         subset = start.index(torch.arange(min(check_pairs, pairs)))

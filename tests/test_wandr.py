@@ -237,6 +237,29 @@ def test_pace_check_rolls_the_prior_towards_a_goal_due_at_the_window_end(walking
     assert (left[-1] < start_distance).float().mean() > 0.8  # the prior walks towards the goal
 
 
+def test_the_pace_term_pulls_sampled_rollouts_towards_the_datas_progress(walking_motion_30fps, body, tmp_path):
+    from motion_envs.priors.train_wandr import WristGoals, pace_term
+
+    clips = WandrClips.from_motions([walking_motion_30fps], body)
+    config = WandrTrainConfig(model=WandrConfig(layers=3, max_width=64), epochs=2, batch_size=16, max_rollout=1,
+                              pace_frames=10, run_dir=tmp_path / "run", weights=tmp_path / "plain.pt")  # fmt: skip
+    plain_entry = train_wandr(config, clips, clips)
+    paced = dataclasses.replace(config, epochs=3, init=config.weights, pace_weight=1.0, pace_windows=16,
+                                run_dir=tmp_path / "paced", weights=tmp_path / "paced.pt")  # fmt: skip
+    paced_entry = train_wandr(paced, clips, clips)
+    starts = clips.window_starts(10)[::7]
+
+    def gap(weights) -> float:
+        with torch.no_grad():
+            return float(pace_term(load_wandr(weights).eval(), clips, WristGoals(clips, config), starts, 10, body,
+                                   torch.Generator().manual_seed(1)).sqrt())  # fmt: skip
+
+    assert gap(paced.weights) < 0.7 * gap(config.weights)
+    assert paced_entry["validation_pace_gap_cm_10_frames"] < plain_entry["validation_pace_gap_cm_10_frames"]
+    with pytest.raises(ValueError, match="pace_weight"):
+        WandrTrainConfig(pace_weight=-1.0)
+
+
 def test_a_learned_prior_starts_as_n01_then_learns_from_the_condition(walking_motion_30fps, body, tmp_path):
     clips = WandrClips.from_motions([walking_motion_30fps], body)
     config = WandrTrainConfig(model=WandrConfig(layers=3, max_width=64, learned_prior=True), epochs=3, batch_size=16,

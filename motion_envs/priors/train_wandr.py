@@ -31,6 +31,13 @@ Reads top to bottom: clips -> windows with hallucinated goals -> statistics
   (translation, orientation and pose averaged separately, then summed, as
   the release) + joint MSE in cm through our FK; plus β·KL with free bits
   (0.05 per dimension) and β ramped 0 → 1e-2 as the release's 2^(t/T) − 1.
+* Pace (ours, off by default: `pace_weight`): every loss above sees the
+  posterior's z, while samplers and policies draw z ~ N(0, I), and with it
+  the prior walked at half the data's pace on its own training windows
+  (`bench wandr-pace`). `pace_term` rolls a few windows per batch out for
+  `pace_frames` frames with z ~ N(0, I) and pulls the pelvis's ground
+  distance to the data's pelvis at the goal frame towards the data's own
+  distance at the same frame: it asks for the data's progress, not its path.
 """
 
 from __future__ import annotations
@@ -82,9 +89,20 @@ class WandrTrainConfig(TrainRun):
     window_stride: int = 1
     contact_weight: float = 1.0
     """Weight of `contact_slide` (cm², like the joint term) in the loss; 0 turns the contact loss off."""
+    pace_weight: float = 0.0
+    """Weight of `pace_term` (cm², like the joint term; 0: off). See the module doc."""
+    pace_frames: int = 90
+    """Frames of each `pace_term` rollout (its windows have a goal at least this far ahead)."""
+    pace_windows: int = 64
+    """Windows per batch rolled out for `pace_term`."""
     init: Path | None = None
     """Prior weights of the same network to start from (None: from scratch)."""
     run_dir: Path = Path("runs/wandr")
+
+    def __post_init__(self) -> None:
+        if self.pace_weight < 0 or self.pace_frames < 1 or self.pace_windows < 1:
+            raise ValueError(f"pace_weight must be ≥ 0 and pace_frames, pace_windows ≥ 1, got {self.pace_weight}, "
+                             f"{self.pace_frames}, {self.pace_windows}")  # fmt: skip
 
     def rollout_limit(self, epoch: int) -> int:
         """k of the schedule: 1 at the start, `max_rollout` from half-way on."""
@@ -237,6 +255,26 @@ def rollout_terms(model: WandrPrior, clips: WandrClips, targets: HindsightTarget
     return terms
 
 
+def pace_term(model: WandrPrior, clips: WandrClips, targets: HindsightTargets, starts: torch.Tensor, frames: int,
+              body: BodyModel, generator: torch.Generator | None = None) -> torch.Tensor:  # fmt: skip
+    """Mean squared gap (cm²) between how far the pelvis is from its goal and how far the data's is, over a rollout
+    of `frames` frames with z ~ N(0, I) from the data at `starts` (B,), each window towards a goal frame at least
+    `frames` ahead (see the module doc). The distance is on the ground, to the data's pelvis at the goal frame."""
+    goal_frames = targets.goal_frames(starts, frames, generator)
+    goal = clips.joints[goal_frames, PELVIS, :2]
+    state = clips.state(starts)
+    total = 0.0
+    for step in range(frames):
+        cond = model.normalise_condition(condition(state, targets.features(state, starts + step, goal_frames)))
+        noise = torch.randn(len(starts), model.config.latent, generator=generator)
+        delta = model.denormalise_delta(model.generate(noise, cond))
+        state, _ = make_state(body, *integrate(state.transl, state.orient, state.pose, delta), delta)
+        left = (state.joints[:, PELVIS, :2] - goal).norm(dim=-1)
+        data_left = (clips.joints[starts + step + 1, PELVIS, :2] - goal).norm(dim=-1)
+        total = total + ((left - data_left) * 100.0).pow(2).mean()
+    return total / frames
+
+
 def contact_slide(before: torch.Tensor, after: torch.Tensor, contacts: torch.Tensor) -> torch.Tensor:
     """Mean squared horizontal step (cm²) of the sole points (B, 4, 3) from one frame to the next where the
     data holds them in contact at both (B, 4) (0 where none is): cleaned data holds them still there, so this
@@ -261,7 +299,8 @@ def fit_statistics(model: WandrPrior, clips: WandrClips, targets: HindsightTarge
 @torch.no_grad()
 def validate(model: WandrPrior, clips: WandrClips, targets: HindsightTargets, config: WandrTrainConfig, body: BodyModel,
              max_windows: int = 1024) -> dict[str, float | list[float]]:  # fmt: skip
-    """Posterior-mean reconstruction of validation windows: one teacher-forced frame and a `max_rollout` rollout."""
+    """Posterior-mean reconstruction of validation windows: one teacher-forced frame and a `max_rollout` rollout;
+    and the root mean `pace_term` of z ~ N(0, I) rollouts (cm)."""
     model.eval()
     generator = torch.Generator().manual_seed(0)
     figures: dict[str, float | list[float]] = {}
@@ -275,6 +314,11 @@ def validate(model: WandrPrior, clips: WandrClips, targets: HindsightTargets, co
                         "validation_joint_error_cm_1_frame": round(float(terms["joint_error_cm"][0]), 3)}  # fmt: skip
         else:
             figures["validation_joint_error_cm_rollout"] = [round(float(e), 2) for e in terms["joint_error_cm"]]
+    starts = clips.window_starts(config.pace_frames)
+    if len(starts):
+        starts = starts[torch.linspace(0, len(starts) - 1, min(max_windows // 4, len(starts))).long()]
+        gap = pace_term(model, clips, targets, starts, config.pace_frames, body, generator).sqrt()
+        figures[f"validation_pace_gap_cm_{config.pace_frames}_frames"] = round(float(gap), 2)
     model.train()
     return figures
 
@@ -311,22 +355,30 @@ def train_delta_prior(model: WandrPrior, kind: str, config: WandrTrainConfig, tr
     total_steps = batches_per_epoch * config.epochs
     decay = config.final_learning_rate / config.learning_rate
 
-    def epoch_batches(epoch: int, generator: torch.Generator) -> list[tuple[torch.Tensor, int, int]]:
+    pace_starts = train.window_starts(config.pace_frames, config.window_stride)
+    if config.pace_weight > 0 and len(pace_starts) == 0:
+        raise ValueError(f"no training window has {config.pace_frames} frames for the pace term (pace_frames)")
+
+    def epoch_batches(epoch: int, generator: torch.Generator) -> list[tuple[torch.Tensor, int, int, torch.Tensor]]:
         starts = train.window_starts(config.max_rollout, config.window_stride)
         limit = config.rollout_limit(epoch)
         steps = torch.randint(1, limit + 1, (batches_per_epoch,), generator=generator).tolist()
         batches = minibatches(starts, config.batch_size, generator)
-        return [(b, epoch * batches_per_epoch + i, s) for i, (b, s) in enumerate(zip(batches, steps))]
+        paced = [pace_starts[torch.randint(len(pace_starts), (min(config.pace_windows, len(pace_starts)),), generator=generator)]
+                 if config.pace_weight > 0 else pace_starts[:0] for _ in batches]  # fmt: skip
+        return [(b, epoch * batches_per_epoch + i, s, p) for i, (b, s, p) in enumerate(zip(batches, steps, paced))]
 
-    def loss_terms(epoch: int, batch: tuple[torch.Tensor, int, int]) -> dict[str, torch.Tensor]:
-        starts, step_number, steps = batch
+    def loss_terms(epoch: int, batch: tuple[torch.Tensor, int, int, torch.Tensor]) -> dict[str, torch.Tensor]:
+        starts, step_number, steps, paced = batch
         for group in optimiser.param_groups:  # linear decay, as the paper's 1e-4 -> 1e-5
             group["lr"] = config.learning_rate * (1 + (decay - 1) * step_number / total_steps)
         goal_frames = train_targets.goal_frames(starts, steps)
         terms = rollout_terms(model, train, train_targets, starts, goal_frames, steps, body, config.free_bits)
         beta = config.kl_beta(step_number, epoch)
-        return {"total": terms["recon"] + terms["joints"] + beta * terms["kl"] + config.contact_weight * terms["contact"],
-                "recon": terms["recon"], "joints": terms["joints"], "kl": terms["kl"], "contact": terms["contact"]}  # fmt: skip
+        terms["pace"] = pace_term(model, train, train_targets, paced, config.pace_frames, body) if len(paced) else torch.zeros(())
+        total = (terms["recon"] + terms["joints"] + beta * terms["kl"] + config.contact_weight * terms["contact"]
+                 + config.pace_weight * terms["pace"])  # fmt: skip
+        return {"total": total} | {name: terms[name] for name in ("recon", "joints", "kl", "contact", "pace")}
 
     history = fit(model, optimiser, config.fit_settings(kind), epoch_batches, loss_terms,
                   lambda epoch: f"rollout ≤ {config.rollout_limit(epoch)}")  # fmt: skip

@@ -379,7 +379,7 @@ def _train_wandr(args: argparse.Namespace) -> int:
              "late_kl_weight": args.late_kl_weight, "kl_raise_epoch": args.kl_raise_epoch,
              "weights": weights_destination(name, run_dir, args.weights, args.ship), "run_dir": run_dir, "init": _prior_init(args),
              "far_goal_probability": args.far_goal_probability, "contact_weight": args.contact_weight,
-             "pace_weight": args.pace_weight, "pace_frames": args.pace_frames}  # fmt: skip
+             "pace_weight": args.pace_weight, "pace_frames": args.pace_frames, "learning_rate": args.learning_rate}  # fmt: skip
     config = WandrTrainConfig(model=model, data_hash=dataset.path.stem, command="motion-envs " + " ".join(sys.argv[1:]),
                               **{key: value for key, value in given.items() if value is not None})  # fmt: skip
     entry = train_wandr(config, train_clips, validation_clips)
@@ -404,7 +404,7 @@ def _train_clops(args: argparse.Namespace) -> int:
     given = {"epochs": args.epochs, "batch_size": args.batch_size, "window_stride": args.window_stride, "seed": args.seed,
              "max_rollout": args.max_rollout, "kl_weight": args.kl_weight, "weights": args.weights, "run_dir": args.run_dir,
              "ship": args.ship or None, "contact_weight": args.contact_weight, "pace_weight": args.pace_weight,
-             "pace_frames": args.pace_frames}  # fmt: skip
+             "pace_frames": args.pace_frames, "learning_rate": args.learning_rate}  # fmt: skip
     if args.prior_init is not None:
         given["init"] = _prior_init(args)
     config = ClopsTrainConfig(model=model, data_hash=dataset.path.stem, command="motion-envs " + " ".join(sys.argv[1:]),
@@ -573,7 +573,7 @@ def parser() -> argparse.ArgumentParser:
     train.add_argument("--init", default=None,
                        help="ppo: start the actor from the data's latents ('data', default), from 'scratch', or from a policy .zip")
     train.add_argument("--log-std-init", type=float, default=None, help="ppo: initial log sigma of the policy (default -1)")
-    train.add_argument("--learning-rate", type=float, default=None, help="ppo, dqn: Adam learning rate")
+    train.add_argument("--learning-rate", type=float, default=None, help="ppo, dqn, wandr, clops: Adam learning rate")
     train.add_argument("--n-steps", type=int, default=None, help="ppo: primitives per body per rollout")
     train.add_argument("--anchor", type=float, default=None, help="ppo: weight of KL to the cloned policy (default 0)")
     train.add_argument("--kl-mean", choices=("zero", "cloned"), default=None,

@@ -244,7 +244,7 @@ def test_the_pace_term_pulls_sampled_rollouts_towards_the_datas_progress(walking
     config = WandrTrainConfig(model=WandrConfig(layers=3, max_width=64), epochs=2, batch_size=16, max_rollout=1,
                               pace_frames=10, run_dir=tmp_path / "run", weights=tmp_path / "plain.pt")  # fmt: skip
     plain_entry = train_wandr(config, clips, clips)
-    paced = dataclasses.replace(config, epochs=3, init=config.weights, pace_weight=1.0, pace_windows=16,
+    paced = dataclasses.replace(config, epochs=3, init=config.weights, pace_weight=10.0, pace_windows=16,
                                 run_dir=tmp_path / "paced", weights=tmp_path / "paced.pt")  # fmt: skip
     paced_entry = train_wandr(paced, clips, clips)
     starts = clips.window_starts(10)[::7]

@@ -25,7 +25,10 @@ pace), goals only ≥ 1.5 m away (the release; also from scratch: 2.06 m
 left after 4 s), 30-frame training rollouts nor a learned conditional
 prior p(z | c) (Sohn et al.'s prior network, `WandrConfig.learned_prior`;
 from scratch: 2.07 m left after 4 s) moved the lag (`wandr_grid`'s module doc has
-their grid figures).
+their grid figures). A pace term in training does (`train wandr
+--pace-weight`, `priors/train_wandr.py`: 0.80 -> 0.44 / 0.37 m left after
+6 s at weights 0.01 / 0.03, the data 0.34), at the cost of 15-s walks that
+sink more; the table in `results/wandr_pace.md` compares them.
 """
 
 from __future__ import annotations

@@ -38,6 +38,13 @@ Reads top to bottom: clips -> windows with hallucinated goals -> statistics
   `pace_frames` frames with z ~ N(0, I) and pulls the pelvis's ground
   distance to the data's pelvis at the goal frame towards the data's own
   distance at the same frame: it asks for the data's progress, not its path.
+  Measured (shipped prior fine-tuned 4 epochs with the `wandr` stage's
+  settings, lr 1e-4, 90-frame pace rollouts; `bench wandr-pace`): weight
+  0.01 / 0.03 leave 0.44 / 0.37 m to go after 6 s (shipped 0.80, the data
+  0.34; validation pace gap 87 -> 47 / 38 cm), but a 15-s sampled walk
+  sinks more (`bench floor`'s head over the 15th second 1.42 -> 1.40 /
+  1.24 m, lowest head 0.98 -> 0.47 / 0.18 m): the faster gait folds some
+  bodies. Not in the shipped recipe until an uprightness term keeps them up.
 """
 
 from __future__ import annotations

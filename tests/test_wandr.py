@@ -237,27 +237,34 @@ def test_pace_check_rolls_the_prior_towards_a_goal_due_at_the_window_end(walking
     assert (left[-1] < start_distance).float().mean() > 0.8  # the prior walks towards the goal
 
 
-def test_the_pace_term_pulls_sampled_rollouts_towards_the_datas_progress(walking_motion_30fps, body, tmp_path):
-    from motion_envs.priors.train_wandr import WristGoals, pace_term
+def test_the_free_running_terms_pull_sampled_rollouts_towards_the_datas_progress_and_posture(walking_motion_30fps, body,
+                                                                                              tmp_path):  # fmt: skip
+    from motion_envs.priors.train_wandr import WristGoals, free_run_terms
 
     clips = WandrClips.from_motions([walking_motion_30fps], body)
     config = WandrTrainConfig(model=WandrConfig(layers=3, max_width=64), epochs=2, batch_size=16, max_rollout=1,
                               pace_frames=10, run_dir=tmp_path / "run", weights=tmp_path / "plain.pt")  # fmt: skip
     plain_entry = train_wandr(config, clips, clips)
-    paced = dataclasses.replace(config, epochs=3, init=config.weights, pace_weight=10.0, pace_windows=16,
-                                run_dir=tmp_path / "paced", weights=tmp_path / "paced.pt")  # fmt: skip
-    paced_entry = train_wandr(paced, clips, clips)
+    tuned = dataclasses.replace(config, epochs=3, init=config.weights, pace_weight=30.0, upright_weight=30.0, pace_windows=16,
+                                run_dir=tmp_path / "tuned", weights=tmp_path / "tuned.pt")  # fmt: skip
+    tuned_entry = train_wandr(tuned, clips, clips)
+    control = dataclasses.replace(tuned, pace_weight=0.0, upright_weight=0.0, run_dir=tmp_path / "control",
+                                  weights=tmp_path / "control.pt")  # the same fine-tune without the terms
+    train_wandr(control, clips, clips)
     starts = clips.window_starts(10)[::7]
 
-    def gap(weights) -> float:
+    def gaps(weights) -> dict[str, float]:
         with torch.no_grad():
-            return float(pace_term(load_wandr(weights).eval(), clips, WristGoals(clips, config), starts, 10, body,
-                                   torch.Generator().manual_seed(1)).sqrt())  # fmt: skip
+            terms = free_run_terms(load_wandr(weights).eval(), clips, WristGoals(clips, config), starts, 10, body,
+                                   torch.Generator().manual_seed(1))  # fmt: skip
+        return {name: float(value.sqrt()) for name, value in terms.items()}
 
-    assert gap(paced.weights) < 0.7 * gap(config.weights)
-    assert paced_entry["validation_pace_gap_cm_10_frames"] < plain_entry["validation_pace_gap_cm_10_frames"]
-    with pytest.raises(ValueError, match="pace_weight"):
-        WandrTrainConfig(pace_weight=-1.0)
+    before, after = gaps(control.weights), gaps(tuned.weights)
+    assert after["pace"] < 0.85 * before["pace"] and after["upright"] < 0.85 * before["upright"]
+    for name in ("pace", "upright"):
+        assert tuned_entry[f"validation_{name}_gap_cm_10_frames"] < plain_entry[f"validation_{name}_gap_cm_10_frames"]
+    with pytest.raises(ValueError, match="upright_weight"):
+        WandrTrainConfig(upright_weight=-1.0)
 
 
 def test_a_learned_prior_starts_as_n01_then_learns_from_the_condition(walking_motion_30fps, body, tmp_path):

@@ -34,10 +34,12 @@ Reads top to bottom: clips -> windows with hallucinated goals -> statistics
 * Pace (ours, off by default: `pace_weight`): every loss above sees the
   posterior's z, while samplers and policies draw z ~ N(0, I), and with it
   the prior walked at half the data's pace on its own training windows
-  (`bench wandr-pace`). `pace_term` rolls a few windows per batch out for
+  (`bench wandr-pace`). The pace term rolls a few windows per batch out for
   `pace_frames` frames with z ~ N(0, I) and pulls the pelvis's ground
   distance to the data's pelvis at the goal frame towards the data's own
-  distance at the same frame: it asks for the data's progress, not its path.
+  distance at the same frame: it asks for the data's progress, not its path
+  (`free_run_terms`, which also holds `upright_weight`'s term: the head's
+  height above the feet against the data's).
   Measured (shipped prior fine-tuned 4 epochs with the `wandr` stage's
   settings, lr 1e-4, 90-frame pace rollouts; `bench wandr-pace`): weight
   0.01 / 0.03 leave 0.44 / 0.37 m to go after 6 s (shipped 0.80, the data
@@ -57,7 +59,7 @@ from typing import Protocol
 import numpy as np
 import torch
 
-from motion_envs.body import BodyModel
+from motion_envs.body import BodyModel, joint_index
 from motion_envs.body.rotations import rotation_matrix
 from motion_envs.data.dataset import MotionDataset
 from motion_envs.data.motion import BodyMotion
@@ -70,6 +72,8 @@ from motion_envs.priors.wandr_features import (
 )  # fmt: skip
 
 WANDR_KIND = "wandr"
+HEAD = joint_index("head")
+FOOT_JOINTS = [joint_index(name) for name in ("left_ankle", "right_ankle", "left_foot", "right_foot")]
 FAR_GOAL_DISTANCE = 1.5
 
 
@@ -97,19 +101,26 @@ class WandrTrainConfig(TrainRun):
     contact_weight: float = 1.0
     """Weight of `contact_slide` (cm², like the joint term) in the loss; 0 turns the contact loss off."""
     pace_weight: float = 0.0
-    """Weight of `pace_term` (cm², like the joint term; 0: off). See the module doc."""
+    """Weight of `free_run_terms`' pace (cm², like the joint term; 0: off). See the module doc."""
+    upright_weight: float = 0.0
+    """Weight of `free_run_terms`' upright gap (cm²; 0: off)."""
     pace_frames: int = 90
-    """Frames of each `pace_term` rollout (its windows have a goal at least this far ahead)."""
+    """Frames of each free-running rollout (its windows have a goal at least this far ahead)."""
     pace_windows: int = 64
-    """Windows per batch rolled out for `pace_term`."""
+    """Windows per batch rolled out for `free_run_terms`."""
     init: Path | None = None
     """Prior weights of the same network to start from (None: from scratch)."""
     run_dir: Path = Path("runs/wandr")
 
     def __post_init__(self) -> None:
-        if self.pace_weight < 0 or self.pace_frames < 1 or self.pace_windows < 1:
-            raise ValueError(f"pace_weight must be ≥ 0 and pace_frames, pace_windows ≥ 1, got {self.pace_weight}, "
-                             f"{self.pace_frames}, {self.pace_windows}")  # fmt: skip
+        if min(self.pace_weight, self.upright_weight) < 0 or self.pace_frames < 1 or self.pace_windows < 1:
+            raise ValueError(f"pace_weight and upright_weight must be ≥ 0 and pace_frames, pace_windows ≥ 1, got "
+                             f"{self.pace_weight}, {self.upright_weight}, {self.pace_frames}, {self.pace_windows}")  # fmt: skip
+
+    @property
+    def free_running(self) -> bool:
+        """Whether batches roll windows out with z ~ N(0, I) (`free_run_terms`)."""
+        return self.pace_weight > 0 or self.upright_weight > 0
 
     def rollout_limit(self, epoch: int) -> int:
         """k of the schedule: 1 at the start, `max_rollout` from half-way on."""
@@ -262,28 +273,39 @@ def rollout_terms(model: WandrPrior, clips: WandrClips, targets: HindsightTarget
     return terms
 
 
-def pace_term(model: WandrPrior, clips: WandrClips, targets: HindsightTargets, starts: torch.Tensor, frames: int,
-              body: BodyModel, generator: torch.Generator | None = None) -> torch.Tensor:  # fmt: skip
-    """Mean squared gap (cm²) between how far the pelvis is from its goal and how far the data's is, over a rollout
-    of `frames` frames with z ~ N(0, I) from the data at `starts` (B,), each window towards a goal frame at least
-    `frames` ahead (see the module doc). The distance is on the ground, to the data's pelvis at the goal frame.
+def free_run_terms(model: WandrPrior, clips: WandrClips, targets: HindsightTargets, starts: torch.Tensor, frames: int,
+                   body: BodyModel, generator: torch.Generator | None = None) -> dict[str, torch.Tensor]:  # fmt: skip
+    """Mean squared gaps (cm²) to the data over a rollout of `frames` frames with z ~ N(0, I) from the data at
+    `starts` (B,), each window towards a goal frame at least `frames` ahead (see the module doc):
+
+    * pace: how far the pelvis is from its goal (on the ground, to the data's pelvis at the goal frame) against how
+      far the data's is at the same frame;
+    * upright: the head's height above the lowest ankle or foot joint against the data's at the same frame.
+
     The gradient reaches each frame's delta only (the state it starts from is detached): back-propagated through
-    the whole rollout, the term blew the fine-tune up within two epochs (validation-free training loss 16 -> 1,125,
+    the whole rollout, the pace term blew the fine-tune up within two epochs (training loss 16 -> 1,125,
     reconstruction 1.4 -> 744, at weights 0.003 and 0.01)."""
     goal_frames = targets.goal_frames(starts, frames, generator)
     goal = clips.joints[goal_frames, PELVIS, :2]
     state = clips.state(starts)
-    total = 0.0
+    totals = {"pace": 0.0, "upright": 0.0}
     for step in range(frames):
         cond = model.normalise_condition(condition(state, targets.features(state, starts + step, goal_frames)))
         noise = torch.randn(len(starts), model.config.latent, generator=generator)
         delta = model.denormalise_delta(model.generate(noise, cond))
         state, _ = make_state(body, *integrate(state.transl, state.orient, state.pose, delta), delta)
+        data = clips.joints[starts + step + 1]
         left = (state.joints[:, PELVIS, :2] - goal).norm(dim=-1)
-        data_left = (clips.joints[starts + step + 1, PELVIS, :2] - goal).norm(dim=-1)
-        total = total + ((left - data_left) * 100.0).pow(2).mean()
+        totals["pace"] = totals["pace"] + ((left - (data[:, PELVIS, :2] - goal).norm(dim=-1)) * 100.0).pow(2).mean()
+        gap = head_height(state.joints) - head_height(data)
+        totals["upright"] = totals["upright"] + (gap * 100.0).pow(2).mean()
         state = WandrState(*(value.detach() for value in state))
-    return total / frames
+    return {name: total / frames for name, total in totals.items()}
+
+
+def head_height(joints: torch.Tensor) -> torch.Tensor:
+    """(B,) the head's height above the lowest ankle or foot joint of bodies' joints (B, 22, 3)."""
+    return joints[:, HEAD, 2] - joints[:, FOOT_JOINTS, 2].amin(dim=-1)
 
 
 def contact_slide(before: torch.Tensor, after: torch.Tensor, contacts: torch.Tensor) -> torch.Tensor:
@@ -311,7 +333,7 @@ def fit_statistics(model: WandrPrior, clips: WandrClips, targets: HindsightTarge
 def validate(model: WandrPrior, clips: WandrClips, targets: HindsightTargets, config: WandrTrainConfig, body: BodyModel,
              max_windows: int = 1024) -> dict[str, float | list[float]]:  # fmt: skip
     """Posterior-mean reconstruction of validation windows: one teacher-forced frame and a `max_rollout` rollout;
-    and the root mean `pace_term` of z ~ N(0, I) rollouts (cm)."""
+    and the root mean `free_run_terms` of z ~ N(0, I) rollouts (cm)."""
     model.eval()
     generator = torch.Generator().manual_seed(0)
     figures: dict[str, float | list[float]] = {}
@@ -328,8 +350,8 @@ def validate(model: WandrPrior, clips: WandrClips, targets: HindsightTargets, co
     starts = clips.window_starts(config.pace_frames)
     if len(starts):
         starts = starts[torch.linspace(0, len(starts) - 1, min(max_windows // 4, len(starts))).long()]
-        gap = pace_term(model, clips, targets, starts, config.pace_frames, body, generator).sqrt()
-        figures[f"validation_pace_gap_cm_{config.pace_frames}_frames"] = round(float(gap), 2)
+        for name, value in free_run_terms(model, clips, targets, starts, config.pace_frames, body, generator).items():
+            figures[f"validation_{name}_gap_cm_{config.pace_frames}_frames"] = round(float(value.sqrt()), 2)
     model.train()
     return figures
 
@@ -367,8 +389,8 @@ def train_delta_prior(model: WandrPrior, kind: str, config: WandrTrainConfig, tr
     decay = config.final_learning_rate / config.learning_rate
 
     pace_starts = train.window_starts(config.pace_frames, config.window_stride)
-    if config.pace_weight > 0 and len(pace_starts) == 0:
-        raise ValueError(f"no training window has {config.pace_frames} frames for the pace term (pace_frames)")
+    if config.free_running and len(pace_starts) == 0:
+        raise ValueError(f"no training window has {config.pace_frames} frames for the free-running terms (pace_frames)")
 
     def epoch_batches(epoch: int, generator: torch.Generator) -> list[tuple[torch.Tensor, int, int, torch.Tensor]]:
         starts = train.window_starts(config.max_rollout, config.window_stride)
@@ -376,7 +398,7 @@ def train_delta_prior(model: WandrPrior, kind: str, config: WandrTrainConfig, tr
         steps = torch.randint(1, limit + 1, (batches_per_epoch,), generator=generator).tolist()
         batches = minibatches(starts, config.batch_size, generator)
         paced = [pace_starts[torch.randint(len(pace_starts), (min(config.pace_windows, len(pace_starts)),), generator=generator)]
-                 if config.pace_weight > 0 else pace_starts[:0] for _ in batches]  # fmt: skip
+                 if config.free_running else pace_starts[:0] for _ in batches]  # fmt: skip
         return [(b, epoch * batches_per_epoch + i, s, p) for i, (b, s, p) in enumerate(zip(batches, steps, paced))]
 
     def loss_terms(epoch: int, batch: tuple[torch.Tensor, int, int, torch.Tensor]) -> dict[str, torch.Tensor]:
@@ -386,10 +408,11 @@ def train_delta_prior(model: WandrPrior, kind: str, config: WandrTrainConfig, tr
         goal_frames = train_targets.goal_frames(starts, steps)
         terms = rollout_terms(model, train, train_targets, starts, goal_frames, steps, body, config.free_bits)
         beta = config.kl_beta(step_number, epoch)
-        terms["pace"] = pace_term(model, train, train_targets, paced, config.pace_frames, body) if len(paced) else torch.zeros(())
+        terms |= (free_run_terms(model, train, train_targets, paced, config.pace_frames, body) if len(paced)
+                  else {"pace": torch.zeros(()), "upright": torch.zeros(())})  # fmt: skip
         total = (terms["recon"] + terms["joints"] + beta * terms["kl"] + config.contact_weight * terms["contact"]
-                 + config.pace_weight * terms["pace"])  # fmt: skip
-        return {"total": total} | {name: terms[name] for name in ("recon", "joints", "kl", "contact", "pace")}
+                 + config.pace_weight * terms["pace"] + config.upright_weight * terms["upright"])  # fmt: skip
+        return {"total": total} | {name: terms[name] for name in ("recon", "joints", "kl", "contact", "pace", "upright")}
 
     history = fit(model, optimiser, config.fit_settings(kind), epoch_batches, loss_terms,
                   lambda epoch: f"rollout ≤ {config.rollout_limit(epoch)}")  # fmt: skip

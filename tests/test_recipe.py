@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -67,3 +68,21 @@ def test_the_clean_priors_load_in_their_envs_and_record_their_data():
     env.action_space.seed(0)
     _, reward, *_ = env.step(env.action_space.sample())
     assert np.isfinite(reward)
+
+
+def test_the_paced_wandr_prior_and_its_policy_ship_beside_the_defaults(tmp_path, monkeypatch):
+    """The pace-tuned WANDR prior and the PPO policy fine-tuned on it (priors/weights/paced/): their records name how
+    they were made, the policy names the prior it acts in, and played in that env it reaches its goals."""
+    from motion_envs.play import play, policy_env_kwargs
+    from motion_envs.priors.training import PACED_WEIGHTS_DIR
+
+    manifest = json.loads((PACED_WEIGHTS_DIR / "manifest.json").read_text())
+    prior, policy = manifest["wandr.pt"], manifest["ppo_wandrreach_alpha1_default.zip"]
+    assert "--pace-weight" in prior["command"] and "--upright-weight" in prior["command"] and prior["data_hash"]
+    assert "--init" in policy["stages"][-1]["command"] and "paced/wandr.pt" in policy["stages"][-1]["command"]
+    file = PACED_WEIGHTS_DIR / "ppo_wandrreach_alpha1_default.zip"
+    weights = policy_env_kwargs("motion_envs/WandrReach-v0", file)[1]["weights"]
+    assert Path(weights).resolve() == (PACED_WEIGHTS_DIR / "wandr.pt").resolve()
+    monkeypatch.chdir(tmp_path)  # the policy's relative prior path is found beside the package from anywhere
+    summaries = play("motion_envs/WandrReach-v0", file, episodes=4, goal_distance=(1.0, 2.0))
+    assert sum(summary["success"] for summary in summaries) >= 3, summaries

@@ -46,7 +46,9 @@ Reads top to bottom: clips -> windows with hallucinated goals -> statistics
   0.34; validation pace gap 87 -> 47 / 38 cm), but a 15-s sampled walk
   sinks more (`bench floor`'s head over the 15th second 1.42 -> 1.40 /
   1.24 m, lowest head 0.98 -> 0.47 / 0.18 m): the faster gait folds some
-  bodies. Not in the shipped recipe until an uprightness term keeps them up.
+  bodies. With the upright term as well (pace 0.03, upright 0.3): 0.43 m
+  left after 6 s and the 15-s walk's head at 1.45 m (lowest 1.23 m); that
+  prior ships in `priors/weights/paced/` beside the default.
 """
 
 from __future__ import annotations

@@ -32,11 +32,17 @@ from motion_envs.precision import cpu_description
 from motion_envs.priors.checkpoint import load_checkpoint, save_checkpoint
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
+PACKAGE_PARENT = WEIGHTS_DIR.parents[2]
+"""The folder that holds the `motion_envs` package (a checkout's root, or site-packages)."""
 CLEAN_WEIGHTS_DIR = WEIGHTS_DIR / "clean"
 """Priors retrained on the cleaned data (issue "Clean motion"), shipped beside the defaults until the agents are
 retrained on them: every shipped policy was trained on the defaults, and a policy acts in its own prior's latent
 space (the WandrReach PPO policy reaches 6.7% on the retrained WANDR prior against 88.9% on its own). Envs take
 them by path (`weights_dir=` / `weights=`)."""
+PACED_WEIGHTS_DIR = WEIGHTS_DIR / "paced"
+"""WANDR's prior fine-tuned with the pace and upright terms (`train wandr --pace-weight --upright-weight`) and the
+WandrReach PPO policy fine-tuned on it, shipped beside the defaults until the full `bench wandr` grid is rerun on
+them; envs take the prior by path (`weights=`), and the policy file names it."""
 
 Batch = TypeVar("Batch")
 
@@ -214,12 +220,20 @@ def record_in_manifest(weights: Path, entry: dict[str, Any]) -> None:
 Module = TypeVar("Module", bound=nn.Module)
 
 
+def resolve_weights(path: str | Path) -> Path:
+    """`path`, or where a relative path that is not found from the working directory lies under the folder that
+    holds the package (policy files name their priors as `motion_envs/priors/weights/...`, relative to it)."""
+    path = Path(path)
+    beside_package = PACKAGE_PARENT / path
+    return beside_package if not path.is_absolute() and not path.exists() and beside_package.exists() else path
+
+
 def load_shipped(path: str | Path, kind: str, build: Callable[[dict[str, Any]], Module]) -> Module:
     """A module from `ship`'s weights (float16 on disk, float32 in memory), in eval mode.
 
     `build` makes the untrained module from the stored config dict.
     """
-    state = load_checkpoint(path, kind)
+    state = load_checkpoint(resolve_weights(path), kind)
     model = build(state["config"])
     model.load_state_dict({name: value.float() if value.is_floating_point() else value
                            for name, value in state["model"].items()})  # fmt: skip

@@ -70,19 +70,23 @@ def test_the_clean_priors_load_in_their_envs_and_record_their_data():
     assert np.isfinite(reward)
 
 
-def test_the_paced_wandr_prior_and_its_policy_ship_beside_the_defaults(tmp_path, monkeypatch):
-    """The pace-tuned WANDR prior and the PPO policy fine-tuned on it (priors/weights/paced/): their records name how
-    they were made, the policy names the prior it acts in, and played in that env it reaches its goals."""
+def test_the_default_wandr_prior_is_the_pace_tuned_one_and_its_policy_was_fine_tuned_on_it(tmp_path, monkeypatch):
+    """The shipped WANDR prior is the recipe's last WANDR stage (pace and upright terms) and ships; the stage it
+    fine-tunes does not. Its record names the prior it replaced; the PPO policy's record names its fine-tune on
+    the paced prior, its file no longer names a prior (it acts in the default), and played from any directory it
+    reaches its goals."""
     from motion_envs.play import play, policy_env_kwargs
-    from motion_envs.priors.training import PACED_WEIGHTS_DIR
+    from motion_envs.priors.training import WEIGHTS_DIR
 
-    manifest = json.loads((PACED_WEIGHTS_DIR / "manifest.json").read_text())
+    shipped = [stage for stage in recipe.RECIPE if stage.weights == "wandr.pt" and stage.ships]
+    assert [stage.name for stage in shipped] == ["wandr_paced"] and "--pace-weight" in shipped[0].command
+    manifest = json.loads((WEIGHTS_DIR / "manifest.json").read_text())
     prior, policy = manifest["wandr.pt"], manifest["ppo_wandrreach_alpha1_default.zip"]
     assert "--pace-weight" in prior["command"] and "--upright-weight" in prior["command"] and prior["data_hash"]
+    assert "--pace-weight" not in prior["replaces"]["command"] and prior["replaces"]["why"]
     assert "--init" in policy["stages"][-1]["command"] and "paced/wandr.pt" in policy["stages"][-1]["command"]
-    file = PACED_WEIGHTS_DIR / "ppo_wandrreach_alpha1_default.zip"
-    weights = policy_env_kwargs("motion_envs/WandrReach-v0", file)[1]["weights"]
-    assert Path(weights).resolve() == (PACED_WEIGHTS_DIR / "wandr.pt").resolve()
-    monkeypatch.chdir(tmp_path)  # the policy's relative prior path is found beside the package from anywhere
+    file = WEIGHTS_DIR / "ppo_wandrreach_alpha1_default.zip"
+    assert "weights" not in policy_env_kwargs("motion_envs/WandrReach-v0", file)[1]
+    monkeypatch.chdir(tmp_path)
     summaries = play("motion_envs/WandrReach-v0", file, episodes=4, goal_distance=(1.0, 2.0))
     assert sum(summary["success"] for summary in summaries) >= 3, summaries

@@ -20,9 +20,11 @@ WANDR's prior is trained with rollouts of at most 10 frames (`wandr_short`), the
 to 60 (`wandr_60`) and 120 frames (`wandr`): trained on 0.33 s of its own output only, it folded over within 15 s
 of sampled walking (trunk tilt 36° and growing, head 0.53 m over the 15th second of a walk towards a goal 20 m
 ahead; after the 60-frame fine-tune ~20° and 1.13 m; a goal 15 m ahead, the issue's protocol: 1.22 m after the
-60-frame fine-tune, 1.42 m after the 120-frame one). `wandr_60`'s 10 minutes are estimated from its last epochs
+60-frame fine-tune, 1.42 m after the 120-frame one). It still walked at half the data's pace (0.80 m left after
+6 s, the data 0.34): `wandr_paced` fine-tunes it with the free-running pace and upright terms
+(`train_wandr.free_run_terms`; 0.43 m, head 1.45 m over a 15-s walk's last second). `wandr_60`'s 10 minutes are estimated from its last epochs
 alone (1.3 s a batch; the measured run shared the cores with a data build: 34 minutes); `wandr`'s 24 were measured
-beside another training on the other core. CLOPS starts from `wandr_short`, as its shipped prior did, and gets the same fine-tune last
+beside another training on the other core, as were `wandr_paced`'s 23. CLOPS starts from `wandr_short`, as its shipped prior did, and gets the same fine-tune last
 (`clops`: rollouts of up to 60 frames, 8 minutes measured alone).
 """
 
@@ -69,7 +71,10 @@ RECIPE: tuple[Stage, ...] = (
     Stage("wandr_60", ("wandr", "--prior-init", "{wandr_short}", "--epochs", "6", "--max-rollout", "60", "--window-stride", "2",
                        "--late-kl-weight", "0.1", "--kl-raise-epoch", "0"), "wandr.pt", 10, needs=("wandr_short",), ships=False),
     Stage("wandr", ("wandr", "--prior-init", "{wandr_60}", "--epochs", "6", "--max-rollout", "120", "--window-stride", "2",
-                    "--late-kl-weight", "0.1", "--kl-raise-epoch", "0"), "wandr.pt", 24, needs=("wandr_60",)),
+                    "--late-kl-weight", "0.1", "--kl-raise-epoch", "0"), "wandr.pt", 24, needs=("wandr_60",), ships=False),
+    Stage("wandr_paced", ("wandr", "--prior-init", "{wandr}", "--epochs", "4", "--max-rollout", "120", "--window-stride", "2",
+                          "--late-kl-weight", "0.1", "--kl-raise-epoch", "0", "--pace-weight", "0.03", "--upright-weight", "0.3",
+                          "--learning-rate", "1e-4"), "wandr.pt", 23, needs=("wandr",)),
     Stage("clops_stage1", ("clops", "--prior-init", "{wandr_short}"), "clops.pt", 6, needs=("wandr_short",), ships=False),
     Stage("clops_stage2", ("clops", "--prior-init", "{clops_stage1}", "--max-rollout", "30", "--epochs", "6"), "clops.pt", 7,
           needs=("clops_stage1",), ships=False),

@@ -48,7 +48,7 @@ Reads top to bottom: clips -> windows with hallucinated goals -> statistics
   1.24 m, lowest head 0.98 -> 0.47 / 0.18 m): the faster gait folds some
   bodies. With the upright term as well (pace 0.03, upright 0.3): 0.43 m
   left after 6 s and the 15-s walk's head at 1.45 m (lowest 1.23 m); that
-  prior ships in `priors/weights/paced/` beside the default.
+  prior is the shipped one (the recipe's `wandr_paced` stage).
 """
 
 from __future__ import annotations

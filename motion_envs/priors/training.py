@@ -39,10 +39,6 @@ CLEAN_WEIGHTS_DIR = WEIGHTS_DIR / "clean"
 retrained on them: every shipped policy was trained on the defaults, and a policy acts in its own prior's latent
 space (the WandrReach PPO policy reaches 6.7% on the retrained WANDR prior against 88.9% on its own). Envs take
 them by path (`weights_dir=` / `weights=`)."""
-PACED_WEIGHTS_DIR = WEIGHTS_DIR / "paced"
-"""WANDR's prior fine-tuned with the pace and upright terms (`train wandr --pace-weight --upright-weight`) and the
-WandrReach PPO policy fine-tuned on it, shipped beside the defaults until the full `bench wandr` grid is rerun on
-them; envs take the prior by path (`weights=`), and the policy file names it."""
 
 Batch = TypeVar("Batch")
 

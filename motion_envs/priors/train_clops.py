@@ -18,7 +18,17 @@ frames, then 6 epochs with rollouts up to 30 frames (`--max-rollout 30`,
 10-frame-trained prior's keeps growing. Bodies still sink after ~8 s of
 sustained walking (head 1.5 -> ~1.1 m over 12 forward actions; WANDR's
 prior does the same past its 8 s episodes): the long-horizon drift of an
-autoregressive prior trained on 17 minutes of motion. The action clusters
+autoregressive prior trained on 17 minutes of motion. WANDR's free-running
+upright term (`upright_weight`, `pace_frames`) helps only over long free
+runs (fine-tunes of the clean prior, 4 epochs, `--max-rollout 60`, lr 1e-4;
+ClopsNav's most forward action for 15 s, 8 episodes, head over the 15th
+second / travel of actions asking > 0.5 m): none 1.31 m, bodies falling /
+0.59 m; upright 0.3 over 90 frames 1.30 / 0.58; 3.0 over 90 frames ~1.2, a
+body fell; 1.0 over 150 frames 1.39, none fell / 0.57; the same with pace
+0.01 1.40 / 0.49; 2 more epochs over 300 frames 1.41 / 0.45. Not shipped:
+short of 1.45, and the clean data's own walking head is lower than that
+(head joint 1.43 m, median over training frames with the pelvis at
+0.8-1.2 m/s; the shipped start poses stand at 1.50). The action clusters
 (`fit_head_actions`) come from the same training clips, mirrored included,
 so they are left-right symmetric.
 """

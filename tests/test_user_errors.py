@@ -213,7 +213,9 @@ def test_fuzzed_reset_options_and_actions_give_a_named_error_or_finite_results(e
 
 
 def test_clops_envs_pickle_deep_copy_and_run_in_async_vector_envs():
-    """embreex's scene made ClopsNav envs unpicklable after reset, and async vector envs hung in their workers."""
+    """embreex's scene made ClopsNav envs unpicklable after reset, and async vector envs hung in their workers. This
+    process has cast rays by the time the vector env starts, so its workers are spawned: a forked one would refuse
+    (`test_a_child_forked_after_casting_refuses_to_cast_instead_of_hanging`)."""
     import copy
     import pickle
 
@@ -226,13 +228,45 @@ def test_clops_envs_pickle_deep_copy_and_run_in_async_vector_envs():
     for twin in twins:
         again, twin_reward, *_ = twin.step(3)
         assert np.array_equal(observation, again) and twin_reward == reward  # same process, same bodies: same bits
-    vector = gym.make_vec(CLOPS_ID, num_envs=2, vectorization_mode="async", scene_seeds=(1000,))
+    vector = gym.make_vec(CLOPS_ID, num_envs=2, vectorization_mode="async", vector_kwargs={"context": "spawn"},
+                          scene_seeds=(1000,))  # fmt: skip
     try:
         views, _ = vector.reset(seed=0)
         _, rewards, *_ = vector.step(np.array([0, 3]))
         assert views.shape == (2, 5, 64, 64) and np.isfinite(rewards).all()
     finally:
         vector.close()
+
+
+def _cast_in_child(results) -> None:
+    """Child of the fork test below: cast one ray and report what happened."""
+    from motion_envs.render.raycast import RayCaster
+
+    try:
+        RayCaster(np.eye(3), np.array([[0, 1, 2]])).cast(np.zeros((1, 3)), np.array([[0.0, 0.0, 1.0]]))
+        results.put("cast")
+    except RuntimeError as error:
+        results.put(str(error))
+
+
+def test_a_child_forked_after_casting_refuses_to_cast_instead_of_hanging():
+    """A child forked from a process whose embree thread pool had run deadlocked in its first scene build (the async
+    vector env test hung the suite); it now raises, naming the fix."""
+    import multiprocessing
+
+    from motion_envs.render.raycast import RayCaster
+
+    hit, distance = RayCaster(np.eye(3), np.array([[0, 1, 2]])).cast(np.full((1, 3), 0.2), np.array([[0.0, 0.0, 1.0]]))
+    assert hit[0] == 0 and np.isclose(distance[0], 0.4, atol=1e-5)  # the plane x + y + z = 1, 0.4 above (0.2, 0.2, 0.2)
+    context = multiprocessing.get_context("fork")
+    results = context.Queue()
+    child = context.Process(target=_cast_in_child, args=(results,))
+    child.start()
+    try:
+        message = results.get(timeout=60)
+    finally:
+        child.join(timeout=10)
+    assert "forked" in message and "spawn" in message
 
 
 def test_next_step_autoreset_works_under_gymnasiums_normalize_observation():

@@ -1,7 +1,15 @@
-"""A static triangle mesh in an embree scene (through embreex), cast once per batch of rays."""
+"""A static triangle mesh in an embree scene (through embreex), cast once per batch of rays.
+
+Fork: embree runs its scene builds on TBB's worker pool, whose locks a forked child inherits in whatever state the
+parent's workers left them; a child forked from a process that had cast rays deadlocked in its first scene build
+(seen: `rtcCommitScene` waiting on TBB's market lock in a ClopsNav `gym.make_vec(..., vectorization_mode="async")`
+worker, the default fork context on Linux, test suite hung). Such a child refuses to cast with a `RuntimeError`
+saying what to do (the "spawn" or "forkserver" context); a child forked before any cast is unaffected.
+"""
 
 from __future__ import annotations
 
+import os
 from concurrent.futures import ThreadPoolExecutor
 from functools import lru_cache
 
@@ -11,6 +19,10 @@ from embreex import rtcore, rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
 _DEVICE = None
+_HAS_CAST = False
+"""Whether this process has cast rays (embree's TBB pool has run)."""
+_FORKED_AFTER_CASTING = False
+"""Whether this process was forked from one that had cast rays (see the module doc)."""
 PARALLEL_RAYS = 8192
 """Fewer rays than this are cast on the calling thread."""
 
@@ -53,6 +65,13 @@ class RayCaster:
         return np.concatenate([r[0] for r in results]), np.concatenate([r[1] for r in results])
 
     def _cast(self, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        global _HAS_CAST
+        if _FORKED_AFTER_CASTING:
+            raise RuntimeError("this process was forked after its parent cast rays with embree, whose thread pool "
+                               "does not survive fork (the first scene build deadlocks); start worker processes "
+                               "with the 'spawn' or 'forkserver' context, e.g. gym.make_vec(..., "
+                               "vectorization_mode='async', vector_kwargs={'context': 'spawn'})")  # fmt: skip
+        _HAS_CAST = True
         result = self._scene.run(np.ascontiguousarray(origins, dtype=np.float32),
                                  np.ascontiguousarray(directions, dtype=np.float32), output=1)  # fmt: skip
         triangle = result["primID"].astype(np.int64)
@@ -64,3 +83,14 @@ class RayCaster:
 def thread_pool(threads: int) -> ThreadPoolExecutor:
     """A process-wide pool of `threads` workers for ray casting and shading."""
     return ThreadPoolExecutor(threads, thread_name_prefix="raycast")
+
+
+def _after_fork_in_child() -> None:
+    """Mark a child forked after casting (module doc) and forget the parent's ray-casting threads, which a child
+    does not have."""
+    global _FORKED_AFTER_CASTING
+    _FORKED_AFTER_CASTING = _HAS_CAST
+    thread_pool.cache_clear()
+
+
+os.register_at_fork(after_in_child=_after_fork_in_child)

@@ -8,14 +8,14 @@ import numpy as np
 import pytest
 import torch
 
-from motion_envs.body import BodyModel
+from motion_envs.body import JOINT_NAMES, BodyModel
 from motion_envs.data.build import content_hash, find_sources, load_clip
 from motion_envs.data.canonical import lowest_foot_points
-from motion_envs.data.cleanup import CleanupConfig, clean, runs, sole_points
+from motion_envs.data.cleanup import CleanupConfig, clean, pelvis_tilt, runs, sole_points, untilt_pelvis
 from motion_envs.data.mirror import mirror
 from motion_envs.data.motion import BodyMotion
 from motion_envs.data.retarget import RetargetConfig
-from motion_envs.data.skeleton_maps import ACCAD_BVH, CMU_MAX_BVH, match_skeleton
+from motion_envs.data.skeleton_maps import ACCAD_BVH, CMU_ACCLAIM, CMU_DAZ_BVH, CMU_MAX_BVH, match_skeleton
 from motion_envs.metrics import loaded_foot_skating, loaded_slide
 
 FPS = 30
@@ -89,6 +89,46 @@ def test_cleanup_lowers_both_skating_measures_on_a_real_walk(mocap_dir, body):
     assert fs(cleaned) < 0.8 * fs(raw), (fs(raw), fs(cleaned))
     residual = np.nanmax(clean(raw, body).lock_residual)
     assert residual < 0.01, f"a locked point drifts {residual * 100:.2f} cm"
+
+
+def joints_of(motion: BodyMotion, body: BodyModel) -> np.ndarray:
+    with torch.no_grad():
+        return body(*(torch.as_tensor(np.asarray(a), dtype=torch.float32) for a in (motion.transl, motion.global_orient,
+                                                                                  motion.body_pose))).joints.numpy()  # fmt: skip
+
+
+def test_the_pelvis_tilt_fix_turns_a_pitched_pelvis_back_without_moving_the_legs(body):
+    """A standing body whose pelvis is pitched 40° forward (its hips and spine keeping their world rotations, as the
+    Daz files'): with the fix its pelvis is back at the target tilt, the legs stay within millimetres, the head
+    rises; without the fix (a subject's own skeleton) nothing changes."""
+    upright = standing(body, np.zeros((FPS, 3)))
+    pitched = untilt_pelvis(upright, body, -40.0)
+    legs = [i for i, name in enumerate(JOINT_NAMES) if name.split("_")[-1] in ("hip", "knee", "ankle", "foot")]
+    before = joints_of(pitched, body)
+    assert np.median(pelvis_tilt(joints_of(upright, body))) < 2 and np.median(pelvis_tilt(before)) > 38
+    assert np.abs(before[:, legs] - joints_of(upright, body)[:, legs]).max() < 0.005  # each hip turns about their midpoint
+    fixed = clean(pitched, body, correct_pelvis_tilt=True)
+    after = joints_of(fixed.motion, body)
+    assert fixed.pelvis_tilt_fix == pytest.approx(np.median(pelvis_tilt(before)) - CleanupConfig().pelvis_tilt_degrees, abs=0.5)
+    assert np.median(pelvis_tilt(after)) == pytest.approx(CleanupConfig().pelvis_tilt_degrees, abs=0.5)
+    assert np.abs(after[:, legs] - before[:, legs]).max() < 0.01  # the hips turn back about their midpoint
+    assert (after[:, 15, 2] - before[:, 15, 2]).min() > 0.02
+    untouched = clean(pitched, body)
+    assert untouched.pelvis_tilt_fix == 0.0 and np.median(pelvis_tilt(joints_of(untouched.motion, body))) > 38
+
+
+@pytest.mark.mocap
+@pytest.mark.parametrize("clip, mapping, fixed", [("cmu/08_11.bvh", CMU_DAZ_BVH, True),
+                                                  ("cmu_extra/35/35_01.amc", CMU_ACCLAIM, False)])  # fmt: skip
+def test_only_clips_on_a_skeleton_not_their_subjects_get_their_pelvis_turned_back(mocap_dir, body, clip, mapping, fixed):
+    """A Daz walk's pelvis is pitched ~43° (the subject's own skeleton in 35_01: 15°): the build turns it back to
+    the target; 35_01 is left as it is."""
+    source = next(s for s in find_sources(mocap_dir) if s.relative == clip)
+    assert mapping.subject_skeleton is not fixed
+    motion = load_clip(source, FPS, body, RetargetConfig(iterations=60))
+    tilt = np.median(pelvis_tilt(joints_of(motion, body)))
+    assert (motion.info["pelvis_tilt_fix"] > 20) if fixed else (motion.info["pelvis_tilt_fix"] == 0.0)
+    assert abs(tilt - CleanupConfig().pelvis_tilt_degrees) < 5, tilt
 
 
 def test_cache_key_changes_with_the_cleanup_settings(tmp_path):

@@ -9,7 +9,8 @@ float32, as cached) and plausible (`check_plausible`) before they enter the cach
 Cleanup (`motion_envs.data.cleanup`: contacts, floor, foot locking) is on by
 default and part of the cache key; `cleanup=None` (`--no-cleanup`) builds the
 uncleaned data to compare. The cache holds each frame's sole contacts
-(`contacts`, (T, 4) bool, `SOLE_POINTS` order; all False without cleanup).
+(`contacts`, (T, 4) bool, `SOLE_POINTS` order; all False without cleanup) and the degrees each clip's pelvis
+was turned back (`pelvis_tilt_fix`, cleanup step 3).
 A killed build resumes: each finished clip (or its failure) is kept in a part
 file beside the cache (`<cache>.parts/`), which goes once the cache is written.
 """
@@ -127,9 +128,11 @@ def load_clip(source: ClipSource, fps: int, body: BodyModel, retarget_config: Re
               cleanup: CleanupConfig | None = CleanupConfig()) -> BodyMotion:  # fmt: skip
     """Read, resample, retarget (for skeletal mocap), clean (unless `cleanup` is None) and canonicalise one clip.
 
-    `info` gains `retarget_error` (T, 22) and, when cleaned, `contacts` (T, 4), `cleanup_shift` (T, 22) and
-    `lock_residual` (T, 4) (see `motion_envs.data.cleanup.CleanupResult`)."""
+    `info` gains `retarget_error` (T, 22) and, when cleaned, `contacts` (T, 4), `cleanup_shift` (T, 22),
+    `lock_residual` (T, 4) and `pelvis_tilt_fix` (degrees; a skeleton not the subject's own) (see
+    `motion_envs.data.cleanup.CleanupResult`)."""
     name = Path(source.relative).with_suffix("").as_posix()
+    mapping = None
     if source.path.suffix.lower() == ".npz":
         motion = resample_body(read_amass_npz(source.path, subject=source.subject), fps)
         motion.info["retarget_error"] = np.zeros((motion.num_frames, 22))
@@ -149,9 +152,9 @@ def load_clip(source: ClipSource, fps: int, body: BodyModel, retarget_config: Re
         motion.info["contacts"] = np.zeros((motion.num_frames, len(SOLE_POINTS)), dtype=bool)
         return canonicalise(motion, body)
     check_plausible(motion, source.relative)  # garbage (inf, 1e300) is refused before cleanup computes on it
-    cleaned = clean(motion, body, cleanup)
+    cleaned = clean(motion, body, cleanup, correct_pelvis_tilt=mapping is not None and not mapping.subject_skeleton)
     cleaned.motion.info.update(contacts=cleaned.contacts, cleanup_shift=cleaned.joint_shift,
-                               lock_residual=cleaned.lock_residual)  # fmt: skip
+                               lock_residual=cleaned.lock_residual, pelvis_tilt_fix=cleaned.pelvis_tilt_fix)  # fmt: skip
     return canonicalise(cleaned.motion, body, ground_first_frame=False)  # cleanup put the floor at z = 0
 
 
@@ -266,6 +269,7 @@ def _write_cache(path: Path, clips: list[tuple[ClipSource, BodyMotion]], failure
         "cleanup": np.array(str(cleanup)),
         "cleanup_shift_mean": np.array([s.mean() for s in shifts]),
         "cleanup_shift_max": np.array([s.max() for s in shifts]),
+        "pelvis_tilt_fix": np.array([motion.info.get("pelvis_tilt_fix", 0.0) for motion in motions]),
         "lock_residual_max": np.array([np.nanmax(r, initial=0.0) for r in residuals]),
         "failures": np.array(failures, dtype=str),
         "mocap_dir": np.array(str(mocap_dir)),

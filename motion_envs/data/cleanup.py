@@ -23,7 +23,22 @@ over 2.6 s). `clean` runs after retargeting, on the body itself:
    level; a tilt is the capture's calibration). Contacts more than
    `floor_tolerance` above the plane (steps, stools, ladders) keep their
    height.
-3. **Foot locking**: during a contact the point holds one position (the mean
+3. **Pelvis tilt**, only for clips whose skeleton is not their subject's
+   own (`SkeletonMap.subject_skeleton`; CMU's Daz-friendly files, every
+   subject on one figure, whose converter also replaced the hip rotations
+   with the pre-retargeting ones): retargeted, their pelvis is pitched
+   forward 41° (the hips' midpoint -> spine1 from vertical, median over
+   frames with both legs straight; 36-54° for 80% of the clips) where the
+   subjects' own skeletons give 14° (`35_01`) and 10-12° (`131_0x`), 1° at
+   rest, which drops the body ~4 cm and tips the pelvis block visibly. The
+   pelvis turns back about its left-right axis by the clip's excess over
+   `pelvis_tilt_degrees` (at most `max_tilt_fix_degrees`; none without
+   `min_upright_seconds` of straight-legged frames to measure it on); the
+   hips and spine1 keep their world rotations and the hips' midpoint stays
+   where it was, so the legs keep their poses and move by millimetres (each
+   hip turns about the midpoint: 4 mm for 40°), and the upper body rides up
+   and back.
+4. **Foot locking**: during a contact the point holds one position (the mean
    of its path over the contact; on the floor at z = 0). Adam on the legs'
    6-D rotations (hips, knees, ankles, toes) and the pelvis translation and
    orientation pulls the points there, with the lock's weight ramped in and
@@ -59,6 +74,9 @@ LEG_JOINTS = ("left_hip", "right_hip", "left_knee", "right_knee", "left_ankle", 
 class CleanupConfig:
     """Thresholds (m, m/s, s) of contact labelling, floor fitting and foot locking; see the module docstring.
 
+    Pelvis tilt (degrees): the target `pelvis_tilt_degrees` (`35_01`'s, the subject's own skeleton); straight-legged
+    frames: both legs' hip-to-ankle at least `upright_straightness` of the leg's length.
+
     The weights are in m^-2 against the contact residual (m^2, times `lock_weight`): `joint_weight` per m^2 of the joints'
     summed squared displacement (what keeps the upper body and the free frames where they were; not for the
     knee, ankle and toe of a foot being locked), `rotation_weight` per unit 6-D distance
@@ -86,6 +104,10 @@ class CleanupConfig:
     floor_weight: float = 10.0
     lock_weight: float = 30.0
     joint_weight: float = 0.1
+    pelvis_tilt_degrees: float = 14.0
+    max_tilt_fix_degrees: float = 40.0
+    upright_straightness: float = 0.85
+    min_upright_seconds: float = 0.5
 
 
 @dataclass(frozen=True)
@@ -232,6 +254,50 @@ def level_floor(motion: BodyMotion, floor: Floor) -> BodyMotion:
     return replace(motion, transl=motion.transl @ turn.T - np.array([0.0, 0.0, height]), global_orient=orient)
 
 
+def pelvis_tilt(joints: np.ndarray) -> np.ndarray:
+    """(T,) degrees: the angle from vertical of the hips' midpoint -> spine1 of body joints (T, 22, 3) (1° at rest)."""
+    trunk_base = joints[:, joint_index("spine1")] - joints[:, [joint_index("left_hip"), joint_index("right_hip")]].mean(axis=1)
+    return np.degrees(np.arccos(np.clip(trunk_base[:, 2] / np.linalg.norm(trunk_base, axis=-1), -1.0, 1.0)))
+
+
+def straightness(joints: np.ndarray, side: str) -> np.ndarray:
+    """(T,) hip-to-ankle distance over the leg's length (thigh + shank) of one leg of body joints (T, 22, 3)."""
+    hip, knee, ankle = (joints[:, joint_index(f"{side}_{part}")] for part in ("hip", "knee", "ankle"))
+    return np.linalg.norm(hip - ankle, axis=-1) / (np.linalg.norm(hip - knee, axis=-1) + np.linalg.norm(knee - ankle, axis=-1))
+
+
+def tilt_excess(joints: np.ndarray, fps: float, config: CleanupConfig = CleanupConfig()) -> float:
+    """Degrees by which the pelvis of body joints (T, 22, 3) is pitched beyond `pelvis_tilt_degrees` (median over
+    straight-legged frames, at most `max_tilt_fix_degrees`; 0 with fewer than `min_upright_seconds` of them)."""
+    upright = np.minimum(straightness(joints, "left"), straightness(joints, "right")) >= config.upright_straightness
+    if upright.sum() < config.min_upright_seconds * fps:
+        return 0.0
+    return float(np.clip(np.median(pelvis_tilt(joints)[upright]) - config.pelvis_tilt_degrees, 0.0, config.max_tilt_fix_degrees))
+
+
+def untilt_pelvis(motion: BodyMotion, body: BodyModel, degrees: float) -> BodyMotion:
+    """The pelvis turned top-backwards by `degrees` about its rest left-right axis (world x at rest), its children
+    (the hips and spine1) keeping their world rotations, and the pelvis moved so the hips' midpoint stays where it
+    was: the legs keep their world poses (each hip moves a few mm about the midpoint), the upper body rides on
+    the turned pelvis (module docstring, step 3)."""
+    if degrees == 0.0:
+        return motion
+    transl, orient, pose = _tensors(motion, torch.float64)
+    turn = roma.rotvec_to_rotmat(torch.tensor([np.radians(degrees), 0.0, 0.0], dtype=torch.float64))
+    axes = body.axes_to_world.double()
+    children = [joint_index(name) - 1 for name in ("left_hip", "right_hip", "spine1")]
+    local = roma.rotvec_to_rotmat(pose)
+    local[:, children] = (axes.T @ turn.T @ axes) @ local[:, children]  # world rotation G·A·L·Aᵀ unchanged
+    orient_turned = roma.rotvec_to_rotmat(orient) @ turn
+    model = copy.deepcopy(body).double()
+    hips = [joint_index("left_hip"), joint_index("right_hip")]
+    with torch.no_grad():
+        before = model(transl, orient, pose).joints[:, hips].mean(dim=1)
+        after = model.from_matrices(transl, orient_turned, local).joints[:, hips].mean(dim=1)
+    return replace(motion, transl=(transl + before - after).numpy(), global_orient=roma.rotmat_to_rotvec(orient_turned).numpy(),
+                   body_pose=roma.rotmat_to_rotvec(local).numpy())  # fmt: skip
+
+
 def lock_targets(points: np.ndarray, contacts: np.ndarray, fps: float,
                  config: CleanupConfig = CleanupConfig()) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
     """Lock targets (T, 4, 3) and weights (T, 4) for sole points (T, 4, 3) on a levelled floor.
@@ -326,23 +392,32 @@ def lock_feet(motion: BodyMotion, body: BodyModel, targets: np.ndarray, weights:
 
 @dataclass(frozen=True)
 class CleanupResult:
-    """motion: cleaned. contacts: (T, 4) bool per sole point. floor: as fitted before levelling.
-    joint_shift: (T, 22) m each joint moved (levelling excluded: a rigid turn of the whole clip).
+    """motion: cleaned. contacts: (T, 4) bool per sole point. floor: as fitted before levelling. pelvis_tilt_fix:
+    degrees the pelvis was turned back (0 unless asked for). joint_shift: (T, 22) m each joint moved by foot
+    locking (levelling, a rigid turn of the whole clip, and the pelvis-tilt fix excluded).
     lock_residual: (T, 4) m distance of each contact point from its lock target (NaN outside contacts)."""
 
     motion: BodyMotion
     contacts: np.ndarray
     floor: Floor
+    pelvis_tilt_fix: float
     joint_shift: np.ndarray
     lock_residual: np.ndarray
 
 
-def clean(motion: BodyMotion, body: BodyModel, config: CleanupConfig = CleanupConfig()) -> CleanupResult:
-    """Contacts, floor and foot locking for one clip (see the module docstring)."""
+def clean(motion: BodyMotion, body: BodyModel, config: CleanupConfig = CleanupConfig(),
+          correct_pelvis_tilt: bool = False) -> CleanupResult:  # fmt: skip
+    """Contacts, floor, pelvis tilt (with `correct_pelvis_tilt`: a skeleton not the subject's own) and foot locking
+    for one clip (see the module docstring)."""
     points = sole_points(motion, body)
     contacts = label_contacts(points, motion.fps, config)
     floor = fit_floor(points, contacts, config)
     levelled = level_floor(motion, floor if floor.level else replace(floor, slope=(0.0, 0.0)))
+    tilt = 0.0
+    if correct_pelvis_tilt:
+        with torch.no_grad():
+            tilt = tilt_excess(body(*_tensors(levelled, torch.float32)).joints.double().numpy(), motion.fps, config)
+        levelled = untilt_pelvis(levelled, body, tilt)
     points = sole_points(levelled, body)
     targets, weights = lock_targets(points, contacts, motion.fps, config)
     locked = lock_feet(levelled, body, targets, weights, config)
@@ -351,4 +426,4 @@ def clean(motion: BodyMotion, body: BodyModel, config: CleanupConfig = CleanupCo
         after = body(*_tensors(locked, torch.float32)).joints
     residual = np.linalg.norm(sole_points(locked, body) - targets, axis=-1)
     residual[~contacts] = np.nan
-    return CleanupResult(locked, contacts, floor, (after - before).norm(dim=-1).numpy(), residual)
+    return CleanupResult(locked, contacts, floor, tilt, (after - before).norm(dim=-1).numpy(), residual)

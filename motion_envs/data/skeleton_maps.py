@@ -20,6 +20,8 @@ class SkeletonMap:
 
     name: shown in reports. joints: body joint name -> source joint name or None.
     leading_frames_to_skip: frames the converter prepended (e.g. a T-pose).
+    subject_skeleton: whether each file's skeleton is its subject's own; False for a converter that puts every
+    subject on one figure (cleanup then corrects the pelvis tilt, `motion_envs.data.cleanup.untilt_pelvis`).
     Sources are Y up (retargeting lifts them with `Y_UP_TO_Z_UP`); their rest
     pose and facing may differ from the body's.
     """
@@ -27,6 +29,7 @@ class SkeletonMap:
     name: str
     joints: dict[str, str | None]
     leading_frames_to_skip: int = 0
+    subject_skeleton: bool = True
 
     def __post_init__(self) -> None:
         if tuple(self.joints) != JOINT_NAMES:
@@ -49,6 +52,7 @@ CMU_DAZ_BVH = SkeletonMap(
         "right_elbow": "rForeArm", "left_wrist": "lHand", "right_wrist": "rHand",
     },  # fmt: skip
     leading_frames_to_skip=1,  # the converter's added T-pose
+    subject_skeleton=False,  # every subject on Daz's Aiko3 figure, hip rotations from the pre-retargeting files
 )
 
 CMU_ACCLAIM = SkeletonMap(

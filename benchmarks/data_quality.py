@@ -29,7 +29,7 @@ from tqdm import tqdm  # noqa: E402
 
 from benchmarks.machine import machine_line  # noqa: E402
 from motion_envs.atomic import atomic_write  # noqa: E402
-from motion_envs.body import PARENTS, BodyModel  # noqa: E402
+from motion_envs.body import PARENTS, BodyModel, joint_index  # noqa: E402
 from motion_envs.body.markers import foot_vertex_ids, marker_ids  # noqa: E402
 from motion_envs.data.build import build  # noqa: E402
 from motion_envs.data.bvh import read_bvh  # noqa: E402
@@ -44,7 +44,7 @@ from motion_envs.body.frames import Y_UP_TO_Z_UP  # noqa: E402
 from motion_envs.body.markers import sole_vertex_ids  # noqa: E402
 from motion_envs.data.asf_amc import read_amc, read_asf  # noqa: E402
 from motion_envs.data.build import find_sources, load_clip  # noqa: E402
-from motion_envs.data.cleanup import CleanupConfig  # noqa: E402
+from motion_envs.data.cleanup import CleanupConfig, horizontal_speed, pelvis_tilt, straightness  # noqa: E402
 from motion_envs.data.motion import BodyMotion  # noqa: E402
 from motion_envs.metrics import contact_score, foot_skating, loaded_foot_skating, stance_ankle_speed  # noqa: E402
 from motion_envs.plots import save  # noqa: E402
@@ -189,6 +189,41 @@ def cleanup_rows(clean: MotionDataset, raw: MotionDataset, body: BodyModel) -> l
     return rows
 
 
+def posture(dataset: MotionDataset, index: int, body: BodyModel) -> tuple[float, float, float] | None:
+    """One clip's walking posture: median head and pelvis height above the lowest ankle or toe joint over frames
+    whose pelvis moves at 0.5-2 m/s on the ground, and median pelvis tilt (`cleanup.pelvis_tilt`) over frames with
+    both legs straight (`CleanupConfig.upright_straightness`); None for a clip with less than 0.5 s of walking."""
+    motion = dataset.clip(index)
+    with torch.inference_mode():
+        joints = body(*body_tensors(motion)).joints.double().numpy()
+    speed = horizontal_speed(joints[:, :1], dataset.fps)[:, 0]
+    walking = (speed >= 0.5) & (speed <= 2.0)
+    if walking.sum() < 0.5 * dataset.fps:
+        return None
+    feet = joints[:, [joint_index(name) for name in ("left_ankle", "right_ankle", "left_foot", "right_foot")], 2].min(axis=1)
+    upright = np.minimum(straightness(joints, "left"), straightness(joints, "right")) >= CleanupConfig().upright_straightness
+    tilt = float(np.median(pelvis_tilt(joints)[upright])) if upright.any() else np.nan
+    return (float(np.median((joints[:, joint_index("head"), 2] - feet)[walking])),
+            float(np.median((joints[:, 0, 2] - feet)[walking])), tilt)  # fmt: skip
+
+
+def posture_rows(clean: MotionDataset, raw: MotionDataset, body: BodyModel) -> list[str]:
+    """Per source skeleton: walking posture before and after cleanup (median over clips), and the pelvis-tilt fix."""
+    arrays = clean.arrays
+    rows = []
+    for skeleton in sorted(set(arrays["clip_skeleton"])):
+        ids = [i for i in clean.clip_ids() if arrays["clip_skeleton"][i] == skeleton]
+        pairs = [(posture(raw, i, body), posture(clean, i, body)) for i in ids]  # both caches hold the same clips in order
+        pairs = [(b, a) for b, a in pairs if b is not None and a is not None]
+        if not pairs:
+            continue
+        cells = [f"{np.nanmedian([b[k] for b, _ in pairs]):.{d}f} → {np.nanmedian([a[k] for _, a in pairs]):.{d}f}"
+                 for k, d in ((0, 3), (1, 3), (2, 1))]  # fmt: skip
+        fixes = arrays["pelvis_tilt_fix"][ids]
+        rows.append(f"| {skeleton} | {len(pairs)} | {' | '.join(cells)} | {np.median(fixes):.1f} ({fixes.min():.1f}-{fixes.max():.1f}) |")
+    return rows
+
+
 def reference_rows(mocap_dir: Path, body: BodyModel) -> list[str]:
     """Clean-capture references and the Daz walks: raw source, retargeted, retargeted and cleaned."""
     sources = find_sources(mocap_dir)
@@ -314,6 +349,19 @@ def main(mocap_dir: Path | None = None, cache_dir: Path | None = None, subsets: 
         "| joints moved, cm (mean / max) | locked point drift, cm (median clip / worst clip) | retarget error (cm) |",
         "|---|---|---|---|---|---|---|---|---|",
         *cleanup_rows(dataset, raw, body),
+        "",
+        "## Posture: walking height and pelvis tilt, per source skeleton (30 fps)",
+        "",
+        "| skeleton | walking clips | head above feet (m) | pelvis above feet (m) | pelvis tilt (°) "
+        "| tilt fix (°), median (range) over all its clips |",
+        "|---|---|---|---|---|---|",
+        *posture_rows(dataset, raw, body),
+        "",
+        "Before → after cleanup, medians over the clips with at least 0.5 s of walking (pelvis 0.5-2 m/s on the",
+        "ground) of each clip's median over those frames; feet: the lowest ankle or toe joint. Pelvis tilt: the",
+        "hips' midpoint -> spine1 from vertical (1° at rest) over frames with both legs straight. Cleanup turns",
+        "back the pelvis of clips on a skeleton not their subject's own (`SkeletonMap.subject_skeleton`: the Daz",
+        "files) to 14°, the subjects' own skeletons' (`motion_envs/data/cleanup.py`, step 3).",
         "",
         "## References: clean capture and the Daz walks (30 fps)",
         "",

@@ -28,7 +28,12 @@ body fell; 1.0 over 150 frames 1.39, none fell / 0.57; the same with pace
 0.01 1.40 / 0.49; 2 more epochs over 300 frames 1.41 / 0.45. Not shipped:
 short of 1.45, and the clean data's own walking head is lower than that
 (head joint 1.43 m, median over training frames with the pelvis at
-0.8-1.2 m/s; the shipped start poses stand at 1.50). The action clusters
+0.8-1.2 m/s; the shipped start poses stand at 1.50). On the data whose Daz
+pelvis tilt cleanup turns back (walking head 1.400 -> 1.435 m above the
+feet), the recipe's CLOPS stages (`motion-envs train priors --stages
+wandr_short,clops_stage1,clops_stage2,clops`) gave 1.12 m, bodies falling /
+0.45 m, and with the 150-frame upright fine-tune 1.44 m / 0.37 m (asked:
+0.91 m): higher heads, shorter steps; not shipped. The action clusters
 (`fit_head_actions`) come from the same training clips, mirrored included,
 so they are left-right symmetric.
 """

@@ -73,7 +73,7 @@ def test_the_clean_priors_load_in_their_envs_and_record_their_data():
 def test_the_default_wandr_prior_is_the_pace_tuned_one_and_its_policy_was_fine_tuned_on_it(tmp_path, monkeypatch):
     """The shipped WANDR prior is the recipe's last WANDR stage (pace and upright terms) and ships; the stage it
     fine-tunes does not. Its record names the prior it replaced; the PPO policy's record names its fine-tune on
-    the paced prior, its file no longer names a prior (it acts in the default), and played from any directory it
+    the shipped prior, its file no longer names a prior (it acts in the default), and played from any directory it
     reaches its goals."""
     from motion_envs.play import play, policy_env_kwargs
     from motion_envs.priors.training import WEIGHTS_DIR
@@ -83,8 +83,9 @@ def test_the_default_wandr_prior_is_the_pace_tuned_one_and_its_policy_was_fine_t
     manifest = json.loads((WEIGHTS_DIR / "manifest.json").read_text())
     prior, policy = manifest["wandr.pt"], manifest["ppo_wandrreach_alpha1_default.zip"]
     assert "--pace-weight" in prior["command"] and "--upright-weight" in prior["command"] and prior["data_hash"]
-    assert "--pace-weight" not in prior["replaces"]["command"] and prior["replaces"]["why"]
-    assert "--init" in policy["stages"][-1]["command"] and "paced/wandr.pt" in policy["stages"][-1]["command"]
+    assert prior["replaces"]["command"] and prior["replaces"]["why"] and prior["note"]
+    last_stage = policy["config"]["command"]  # the policy's own run: fine-tuned from a policy, in the prior it ships with
+    assert "--init" in last_stage and "--env-option weights=" in last_stage and policy["promoted"]
     file = WEIGHTS_DIR / "ppo_wandrreach_alpha1_default.zip"
     assert "weights" not in policy_env_kwargs("motion_envs/WandrReach-v0", file)[1]
     monkeypatch.chdir(tmp_path)

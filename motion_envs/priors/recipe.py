@@ -27,12 +27,12 @@ alone (1.3 s a batch; the measured run shared the cores with a data build: 34 mi
 beside another training on the other core, as were `wandr_paced`'s 23. CLOPS starts from `wandr_short`, as its shipped prior did, and gets the same fine-tune last
 (`clops`: rollouts of up to 60 frames, 8 minutes measured alone).
 
-The shipped priors were trained on the data before cleanup turned back the Daz files' pelvis tilt
-(`motion_envs.data.cleanup`, step 3). The WANDR stages rerun on that data (`runs/priors_tilt`, not shipped: the
-WandrReach PPO policy acts in the shipped prior's latent space): pace 0.31 m left after 6 s (`bench wandr-pace`
-on the new windows; shipped 0.43, the data 0.30); the 8-s sampler (3,750 rollouts) SR 10.2% / FS 16.0% against
-the shipped prior's 6.2% / 21.3%, the paced sampler 68.3% against 84.5%; head over the last second of a 15-s
-walk 1.44 m (shipped 1.45).
+The shipped WANDR prior is these four stages rerun on the data after cleanup turned back the Daz files' pelvis
+tilt (`motion_envs.data.cleanup`, step 3; `runs/priors_tilt`): pace 0.31 m left after 6 s (`bench wandr-pace`;
+the prior before 0.43, the data 0.30); the 8-s sampler (3,750 rollouts) SR 10.2% / FS 16.0% against the previous
+prior's 6.2% / 21.3%, the paced sampler 68.3% against 84.5%; head over the last second of a 15-s walk 1.44 m
+(1.45). GAMMA's and CLOPS's shipped priors were trained on the data before that step (each manifest's
+`data_hash` names its cache).
 """
 
 from __future__ import annotations

@@ -154,13 +154,15 @@ def test_reset_options_steer_the_goal(shipped):
 
 def test_sampler_reaches_a_goal_just_in_front_of_the_wrist(shipped):
     core = WandrReachCore(WandrReachConfig(max_frames=30), shipped)  # due in 1 s
-    count = 16
+    count = 64
     rows = torch.arange(count) % core.num_starts
     state = core.initial_state(rows, torch.zeros(count), torch.zeros(count, 1, 3))
     goal = state.joints[:, RIGHT_WRIST] + 0.3 * heading(state.orient)[:, :, 1]
     final = roll_out(core, core.initial_state(rows, torch.zeros(count), goal[:, None]), WandrSampler(seed=0))
-    assert final.reached.float().mean() >= 0.25  # the shipped prior: 6 of 16 (its mean z: 12 of 16)
-    assert (final.closest < 0.25).all()  # every wrist came closer than the 0.3 m it started at
+    # the shipped prior (Zen 4, seeds 0 and 1): 31-39% reached, 94-95% of wrists closer than 0.25 m, median
+    # closest 0.11-0.13 m; the prior it replaced 52-56%, 98-100%, 0.10 m
+    assert final.reached.float().mean() >= 0.2
+    assert (final.closest < 0.25).float().mean() >= 0.85 and final.closest.median() < 0.18  # the wrists came closer
 
 
 def test_a_paced_goal_is_reached_far_more_often_than_one_due_in_8_s_and_the_mean_latent_slides_less(shipped):
@@ -290,7 +292,7 @@ def test_a_learned_prior_starts_as_n01_then_learns_from_the_condition(walking_mo
 def test_pelvis_goals_walk_waypoints_and_the_asked_pace_matters(shipped):
     """WANDR following a two-waypoint path 3 m straight ahead with pelvis goals (`baselines.wandr_waypoints`): the
     wrist goal it is handed asks for exactly the pelvis's path to the waypoint; at the shipped pace most bodies
-    walk the path and stop there, while a pace of 0.1 m/s leaves every body short of it after the same 10 s."""
+    walk the path and stop there, while a pace of 0.1 m/s leaves most bodies short of it after the same 10 s."""
     from baselines.wandr_waypoints import follow_waypoints, pelvis_goal_as_wrist_goal
 
     core = WandrReachCore(WandrReachConfig(), shipped)
@@ -308,4 +310,6 @@ def test_pelvis_goals_walk_waypoints_and_the_asked_pace_matters(shipped):
              for pace in (3.0, 0.1)}  # fmt: skip
     assert walks[3.0].reached.sum() >= 6, walks[3.0]  # measured: 8 of 8
     assert (walks[3.0].frames[walks[3.0].reached] < 300).all() and (walks[3.0].distance[walks[3.0].reached] <= 0.3).all()
-    assert not walks[0.1].reached.any() and (walks[0.1].distance > 0.5).all(), walks[0.1]
+    # measured at 0.1 m/s: 1 of 8 reached (0.30 m, the body facing +3 rad), the other 7 0.6-1.7 m short
+    # (the prior before the pelvis-tilt fix: none, 0.9-2.9 m)
+    assert walks[0.1].reached.sum() <= 2 and (walks[0.1].distance > 0.5).sum() >= 6, walks[0.1]

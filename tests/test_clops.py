@@ -57,6 +57,20 @@ def test_kmeans_actions_are_reproducible_for_a_seed(walking_motion_30fps, body):
     assert first[0, 1] > 0.5  # a walking clip: the head travels over half a metre a second
 
 
+def test_a_free_run_heads_for_one_action_target_after_another(walking_motion_30fps, body):
+    """CLOPS's free-running terms re-target every horizon, as ClopsNav's actions do: with a 10-frame horizon a
+    50-frame run heads for the data's head 10, 20, ..., 50 frames after its start, a 15-frame run for 10 and then
+    its last frame."""
+    from motion_envs.priors.train_clops import HeadTargets
+
+    targets, starts = HeadTargets(WandrClips.from_motions([walking_motion_30fps], body), 10), torch.tensor([0, 7])
+    fixed = targets.goal_frames(starts, 50)
+    heading_for = [targets.free_run_goal_frames(starts, step, 50, fixed) - starts for step in range(50)]
+    assert [int(frames[0]) for frames in heading_for] == [10 * (step // 10 + 1) for step in range(50)]
+    assert torch.equal(heading_for[49], torch.tensor([50, 50]))
+    assert [int(targets.free_run_goal_frames(starts, step, 15, fixed)[1]) for step in (0, 9, 10, 14)] == [17, 17, 22, 22]
+
+
 def test_a_tiny_clops_training_run_lowers_its_loss(walking_motion_30fps, body, tmp_path):
     clips = WandrClips.from_motions([walking_motion_30fps], body)
     config = ClopsTrainConfig(epochs=5, batch_size=16, window_stride=1, max_rollout=1, init=None, run_dir=tmp_path / "run",

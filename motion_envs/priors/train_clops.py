@@ -33,7 +33,12 @@ pelvis tilt cleanup turns back (walking head 1.400 -> 1.435 m above the
 feet), the recipe's CLOPS stages (`motion-envs train priors --stages
 wandr_short,clops_stage1,clops_stage2,clops`) gave 1.12 m, bodies falling /
 0.45 m, and with the 150-frame upright fine-tune 1.44 m / 0.37 m (asked:
-0.91 m): higher heads, shorter steps; not shipped. The action clusters
+0.91 m): higher heads, shorter steps; not shipped. Those fine-tunes' free runs
+headed for one head target `pace_frames` ahead (5 s) for the whole run,
+which no ClopsNav action asks: a free run now strings actions, each
+N-frame chunk heading for the data's head at its end
+(`HeadTargets.free_run_goal_frames`), so the pace term asks for the data's
+progress towards 1-s targets, as ClopsNav's. The action clusters
 (`fit_head_actions`) come from the same training clips, mirrored included,
 so they are left-right symmetric.
 """
@@ -90,6 +95,11 @@ class HeadTargets:
 
     def features(self, state: WandrState, frames: torch.Tensor, goal_frames: torch.Tensor) -> torch.Tensor:
         return head_target_features(state, self.head(goal_frames))
+
+    def free_run_goal_frames(self, starts: torch.Tensor, step: int, frames: int, goal_frames: torch.Tensor) -> torch.Tensor:
+        """The data's head at the end of the `horizon`-frame chunk `step` lies in (the run's last frame at most):
+        a free run is a string of actions, each due one horizon later, as ClopsNav's (module doc)."""
+        return starts + min((step // self.horizon + 1) * self.horizon, frames)
 
 
 def fit_head_actions(clips: WandrClips, horizon: int, count: int, seed: int = 0) -> np.ndarray:

@@ -219,6 +219,11 @@ class HindsightTargets(Protocol):
         """(B, 9) features of bodies `state` (now at data frames `frames`, (B,)) towards their goal frames (B,)."""
         ...
 
+    def free_run_goal_frames(self, starts: torch.Tensor, step: int, frames: int, goal_frames: torch.Tensor) -> torch.Tensor:
+        """(B,) the goal frames a `frames`-frame free run (`free_run_terms`) from `starts` heads for at its `step`
+        (0-based), given `goal_frames(starts, frames)`, as the envs hand out goals."""
+        ...
+
 
 @dataclass(frozen=True)
 class WristGoals:
@@ -235,6 +240,9 @@ class WristGoals:
         goal = self.clips.joints[goal_frames, RIGHT_WRIST]
         return intention(state.joints, state.orient, goal, goal_frames - frames, goal_heading(self.clips.orient[goal_frames]),
                          self.config.model.intentions)  # fmt: skip
+
+    def free_run_goal_frames(self, starts: torch.Tensor, step: int, frames: int, goal_frames: torch.Tensor) -> torch.Tensor:
+        return goal_frames  # one goal for the whole run, as WandrReach's episodes
 
 
 def rollout_terms(model: WandrPrior, clips: WandrClips, targets: HindsightTargets, starts: torch.Tensor,
@@ -280,7 +288,8 @@ def rollout_terms(model: WandrPrior, clips: WandrClips, targets: HindsightTarget
 def free_run_terms(model: WandrPrior, clips: WandrClips, targets: HindsightTargets, starts: torch.Tensor, frames: int,
                    body: BodyModel, generator: torch.Generator | None = None) -> dict[str, torch.Tensor]:  # fmt: skip
     """Mean squared gaps (cm²) to the data over a rollout of `frames` frames with z ~ N(0, I) from the data at
-    `starts` (B,), each window towards a goal frame at least `frames` ahead (see the module doc):
+    `starts` (B,), towards the goal frames `targets.free_run_goal_frames` hands out (WANDR: one at least `frames`
+    ahead; CLOPS: the next action's end; see the module doc):
 
     * pace: how far the pelvis is from its goal (on the ground, to the data's pelvis at the goal frame) against how
       far the data's is at the same frame;
@@ -289,11 +298,12 @@ def free_run_terms(model: WandrPrior, clips: WandrClips, targets: HindsightTarge
     The gradient reaches each frame's delta only (the state it starts from is detached): back-propagated through
     the whole rollout, the pace term blew the fine-tune up within two epochs (training loss 16 -> 1,125,
     reconstruction 1.4 -> 744, at weights 0.003 and 0.01)."""
-    goal_frames = targets.goal_frames(starts, frames, generator)
-    goal = clips.joints[goal_frames, PELVIS, :2]
+    run_goal_frames = targets.goal_frames(starts, frames, generator)
     state = clips.state(starts)
     totals = {"pace": 0.0, "upright": 0.0}
     for step in range(frames):
+        goal_frames = targets.free_run_goal_frames(starts, step, frames, run_goal_frames)
+        goal = clips.joints[goal_frames, PELVIS, :2]
         cond = model.normalise_condition(condition(state, targets.features(state, starts + step, goal_frames)))
         noise = torch.randn(len(starts), model.config.latent, generator=generator)
         delta = model.denormalise_delta(model.generate(noise, cond))

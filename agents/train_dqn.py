@@ -9,7 +9,9 @@ the best window's policy under `priors/weights/` + manifest entry + the
 learning-curve plot.
 
 Resuming reloads the model, not the replay buffer (50k views are 2 GB): the
-buffer refills for `learning_starts` steps before updates go on.
+buffer refills for `learning_starts` steps before updates go on. A fine-tune
+(`init`: a policy file) starts from that policy's Q-network the same way, its
+exploration from `init_exploration` instead of 1.0, since the policy already acts.
 
 The paper's hyperparameter table lost its numbers (REFERENCE_NOTES §5);
 ours are sized for two CPU cores (documented on each field).
@@ -62,6 +64,11 @@ class DQNTrainConfig:
     beta_start: float = 0.4
     checkpoint_minutes: float = 3.0
     seed: int = 0
+    init: Path | None = None
+    """A policy file to fine-tune (same observation options and action count), e.g. a shipped policy moved to a
+    retrained prior whose action deltas keep their meaning; None: a new Q-network."""
+    init_exploration: float = 0.2
+    """A fine-tune's first exploration rate (falling to `exploration_final_eps` over `exploration_fraction`)."""
     device: str = "cpu"
     """Where the Q-network and the env's prior run ("cuda" on a GPU machine; the views are ray-cast on the CPU)."""
     run_dir: Path = Path("runs/dqn")
@@ -82,6 +89,10 @@ class DQNTrainConfig:
             raise ValueError(f"engine must be 'sb3' or 'rllib', got {self.engine!r}")
         if self.env_runners < 0 or (self.env_runners and self.num_envs % self.env_runners):
             raise ValueError(f"env_runners must be >= 0 and split num_envs ({self.num_envs}) evenly, got {self.env_runners}")
+        if self.init is not None and (self.engine != "sb3" or not Path(self.init).is_file()):
+            raise ValueError(f"init must be an existing policy file and needs engine 'sb3', got {self.init!r} ({self.engine})")
+        if not 0 <= self.init_exploration <= 1:
+            raise ValueError(f"init_exploration must be within [0, 1], got {self.init_exploration}")
 
     def checkpoint_path(self) -> Path:
         """What a resumed run continues from: SB3's model.zip, or RLlib's checkpoint folder."""
@@ -102,9 +113,23 @@ def make_model(config: DQNTrainConfig, venv: VecMonitor) -> PrioritizedDoubleDQN
         learning_starts=config.learning_starts, batch_size=config.batch_size, learning_rate=config.learning_rate,
         gamma=config.gamma, train_freq=1, gradient_steps=config.gradient_steps,
         target_update_interval=config.target_update_interval, exploration_fraction=config.exploration_fraction,
+        exploration_initial_eps=1.0 if config.init is None else config.init_exploration,
         exploration_final_eps=config.exploration_final_eps, seed=config.seed, device=config.device,
         tensorboard_log=str(config.run_dir / "tensorboard"),
     )  # fmt: skip
+
+
+def fine_tuned_model(config: DQNTrainConfig, venv: VecMonitor) -> PrioritizedDoubleDQN:
+    """The policy file `config.init` as a new run's model: its Q-network (the target a copy of it), and this run's
+    step count (0), replay warm-up, exploration (from `init_exploration`) and optimiser settings."""
+    try:
+        model = PrioritizedDoubleDQN.load(config.init, env=venv, device=config.device)
+    except ValueError as error:
+        raise ValueError(f"{config.init} does not fit this run's env (observation options or actions): {error}") from error
+    fresh = make_model(config, venv)
+    fresh.policy.load_state_dict(model.policy.state_dict())
+    fresh.q_net_target.load_state_dict(fresh.q_net.state_dict())  # the target starts from the policy's Q-values
+    return fresh
 
 
 def train_dqn(config: DQNTrainConfig) -> dict:
@@ -125,6 +150,8 @@ def train_dqn(config: DQNTrainConfig) -> dict:
         model = PrioritizedDoubleDQN.load(checkpoint, env=venv, device=config.device)
         model.learning_starts = model.num_timesteps + config.learning_starts  # refill the (unsaved) buffer first
         print(f"resuming {checkpoint} at {model.num_timesteps} steps", file=sys.stderr)
+    elif config.init is not None:
+        model = fine_tuned_model(config, venv)
     else:
         model = make_model(config, venv)
     callback = CurveCallback(config.run_dir, config.checkpoint_minutes, curve)

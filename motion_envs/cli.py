@@ -274,7 +274,7 @@ def _train_dqn(args: argparse.Namespace) -> int:
              "num_envs": args.num_envs, "total_timesteps": args.timesteps, "run_dir": args.run_dir, "weights": args.weights, "seed": args.seed,
              "learning_rate": args.learning_rate, "batch_size": args.batch_size, "ship": args.ship or None, "device": args.device,
              "env_kwargs": _env_options(args) or None, "engine": args.engine, "env_runners": args.env_runners,
-             "address": args.address}  # fmt: skip
+             "address": args.address, "init": None if args.init is None else Path(args.init)}  # fmt: skip
     config = DQNTrainConfig(command="motion-envs " + " ".join(sys.argv[1:]),
                             **{name: value for name, value in given.items() if value is not None})  # fmt: skip
     if config.run_dir == DQNTrainConfig.run_dir:
@@ -572,7 +572,8 @@ def parser() -> argparse.ArgumentParser:
     train.add_argument("--num-envs", type=int, default=None, help="ppo, dqn: bodies stepped together")
     train.add_argument("--timesteps", type=int, default=None, help="ppo, dqn: total env steps (primitives; dqn: actions)")
     train.add_argument("--init", default=None,
-                       help="ppo: start the actor from the data's latents ('data', default), from 'scratch', or from a policy .zip")
+                       help="ppo: start the actor from the data's latents ('data', default), from 'scratch', or from a policy .zip; "
+                            "dqn: fine-tune a policy .zip (default: a new Q-network)")
     train.add_argument("--log-std-init", type=float, default=None, help="ppo: initial log sigma of the policy (default -1)")
     train.add_argument("--learning-rate", type=float, default=None, help="ppo, dqn, wandr, clops: Adam learning rate")
     train.add_argument("--n-steps", type=int, default=None, help="ppo: primitives per body per rollout")

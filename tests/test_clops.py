@@ -350,6 +350,28 @@ def test_a_tiny_dqn_run_on_clops_nav(tmp_path):
     assert actions.shape == (2,) and ((0 <= actions) & (actions < 16)).all()
 
 
+def test_a_dqn_fine_tune_starts_from_the_policy_file_and_rejects_one_for_other_observations(tmp_path):
+    from stable_baselines3.common.vec_env import VecMonitor
+
+    from agents.train_dqn import DQNTrainConfig, fine_tuned_model
+    from agents.vec_env import NativeVecEnv
+    from motion_envs.priors.training import WEIGHTS_DIR
+
+    shipped = WEIGHTS_DIR / "dqn_clopsnav_open.zip"
+    config = DQNTrainConfig(num_envs=2, run_dir=tmp_path, init=shipped, init_exploration=0.3)
+    venv = VecMonitor(NativeVecEnv.make(ENV_ID, num_envs=2, scene_seeds=SEEDS, max_seconds=3.0))
+    model = fine_tuned_model(config, venv)
+    observation = torch.as_tensor(venv.reset())
+    expected = PrioritizedDoubleDQN.load(shipped, device="cpu").q_net(observation)
+    assert torch.equal(model.q_net(observation), expected) and torch.equal(model.q_net_target(observation), expected)
+    assert model.num_timesteps == 0 and model.exploration_schedule(1.0) == pytest.approx(0.3)
+    memory = DQNTrainConfig(num_envs=2, run_dir=tmp_path, init=WEIGHTS_DIR / "dqn_clopsnav_open_memory.zip")
+    with pytest.raises(ValueError, match="does not fit this run's env"):
+        fine_tuned_model(memory, venv)
+    with pytest.raises(ValueError, match="init must be an existing policy file"):
+        DQNTrainConfig(init=tmp_path / "missing.zip")
+
+
 def test_play_writes_every_frame_of_a_clops_episode(tmp_path):
     import imageio.v2 as imageio
 

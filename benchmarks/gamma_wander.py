@@ -7,8 +7,8 @@
    (GAMMA's Table 1 protocol: success when any clone arrives) and `repeats` single bodies (per-body success).
    The WANDR row walks the same paths with WANDR's sampler (z ~ N(0, I) every frame) on the shipped WANDR
    prior, the pelvis goal handed over as a wrist goal (`baselines.wandr_waypoints`: the paper's C.3 extension
-   at inference time, each waypoint asked for at 3 m/s because the prior walks at about half the pace it is
-   asked), one body per path and repeat, for as long as the GAMMA rows get (40 s).
+   at inference time, each waypoint asked for at a walking pace, 1.2 m/s: `ASKED_PACE`), one body per path and
+   repeat, for as long as the GAMMA rows get (40 s).
 2. **Rooms**: `rooms` held-out rooms per layout family (`TEST_SEEDS`), start and goal at the far ends of the
    walkable region (`scenes.paths.far_ends`), one body per room. Collisions: share of primitives in which a
    body sphere is more than 2 cm inside furniture or a wall, and per second of motion. The "straight at the

@@ -399,6 +399,7 @@ def _prior_init(args: argparse.Namespace) -> Path | None:
 def _train_clops(args: argparse.Namespace) -> int:
     from motion_envs.priors.clops import ClopsConfig
     from motion_envs.priors.train_clops import ClopsTrainConfig, train_clops
+    from motion_envs.priors.training import WEIGHTS_DIR
 
     dataset, train_clips, validation_clips = _delta_prior_clips(args)
     model = ClopsConfig(**{name: value for name, value in (("layers", args.layers), ("actions", args.actions)) if value})
@@ -408,6 +409,8 @@ def _train_clops(args: argparse.Namespace) -> int:
              "upright_weight": args.upright_weight, "pace_frames": args.pace_frames, "learning_rate": args.learning_rate}  # fmt: skip
     if args.prior_init is not None:
         given["init"] = _prior_init(args)
+    if args.actions_from is not None:
+        given["actions_from"] = WEIGHTS_DIR / "clops.pt" if args.actions_from == "shipped" else Path(args.actions_from)
     config = ClopsTrainConfig(model=model, data_hash=dataset.path.stem, command="motion-envs " + " ".join(sys.argv[1:]),
                               **{key: value for key, value in given.items() if value is not None or key == "init"})  # fmt: skip
     entry = train_clops(config, train_clips, validation_clips)
@@ -597,6 +600,8 @@ def parser() -> argparse.ArgumentParser:
     train.add_argument("--goal-memory", action="store_true",
                        help="dqn: also observe a memory of what the view has shown (where the goal was last seen; ours)")
     train.add_argument("--actions", type=int, default=None, help="clops: k-means head-delta clusters K (default 16)")
+    train.add_argument("--actions-from", default=None, metavar="CLOPS.pt|shipped",
+                       help="clops: keep this prior's action deltas ('shipped': the shipped prior's) instead of a k-means fit")
     train.add_argument("--learned-prior", action="store_true",
                        help="wandr: a conditional prior p(z | c) instead of N(0, I) (ours; samplers still draw N(0, I) noise)")
     train.add_argument("--far-goal-probability", type=float, default=None,

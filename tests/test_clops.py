@@ -80,6 +80,13 @@ def test_a_tiny_clops_training_run_lowers_its_loss(walking_motion_30fps, body, t
     assert entry["train_loss_by_epoch"][-1] < entry["train_loss_by_epoch"][0]
     prior = load_clops(tmp_path / "clops.pt")
     assert prior.actions.shape == (4, 4) and prior.actions.abs().sum() > 0  # the action set travels with the weights
+    checkpoint = torch.load(tmp_path / "clops.pt", weights_only=False)
+    checkpoint["model"]["actions"] = checkpoint["model"]["actions"] * 2  # an action set no fit gives
+    torch.save(checkpoint, tmp_path / "doubled.pt")
+    kept = dataclasses.replace(config, epochs=1, actions_from=tmp_path / "doubled.pt", run_dir=tmp_path / "kept",
+                               weights=tmp_path / "kept.pt")  # fmt: skip
+    train_clops(kept, clips, clips)
+    assert torch.equal(load_clops(tmp_path / "kept.pt").actions, prior.actions * 2)  # kept, not refitted
 
 
 def test_the_prior_moves_the_head_towards_a_target_half_a_metre_ahead(core):

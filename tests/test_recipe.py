@@ -91,3 +91,27 @@ def test_the_default_wandr_prior_is_the_pace_tuned_one_and_its_policy_was_fine_t
     monkeypatch.chdir(tmp_path)
     summaries = play("motion_envs/WandrReach-v0", file, episodes=4, goal_distance=(1.0, 2.0))
     assert sum(summary["success"] for summary in summaries) >= 3, summaries
+
+
+def test_the_default_clops_prior_is_the_upright_one_and_its_policies_were_fine_tuned_on_it(tmp_path, monkeypatch):
+    """The shipped CLOPS prior is the recipe's `clops_upright` stage (free-running upright and pace terms) keeping
+    the shipped action deltas, so that the ClopsNav policies' action indices keep their meaning; each DQN record
+    names its fine-tune from the file it replaced on that prior, its file no longer names a prior (it acts in the
+    default one), and played from any directory the goal-memory policy finds the goal in held-out rooms."""
+    from motion_envs.play import play, policy_env_kwargs
+    from motion_envs.priors.training import WEIGHTS_DIR
+
+    shipped = [stage for stage in recipe.RECIPE if stage.weights == "clops.pt" and stage.ships]
+    assert [stage.name for stage in shipped] == ["clops_upright"]
+    assert shipped[0].command[shipped[0].command.index("--actions-from") + 1] == "shipped"
+    manifest = json.loads((WEIGHTS_DIR / "manifest.json").read_text())
+    prior = manifest["clops.pt"]
+    assert "--upright-weight" in prior["command"] and prior["actions"] and prior["replaces"]["why"] and prior["note"]
+    for name in ("dqn_clopsnav_open.zip", "dqn_clopsnav_open_memory.zip", "dqn_clopsnav_open_known_goal.zip",
+                 "dqn_clopsnav_mixed.zip"):  # fmt: skip
+        command = manifest[name]["config"]["command"]
+        assert "--init" in command and "--env-option weights=" in command and manifest[name]["promoted"], name
+        assert "weights" not in policy_env_kwargs("motion_envs/ClopsNav-v0", WEIGHTS_DIR / name)[1], name
+    monkeypatch.chdir(tmp_path)
+    summaries = play("motion_envs/ClopsNav-v0", WEIGHTS_DIR / "dqn_clopsnav_open_memory.zip", episodes=4, split="test")
+    assert sum(summary["success"] for summary in summaries) >= 2, summaries

@@ -29,15 +29,16 @@ beside another training on the other core, as were `wandr_paced`'s 23. CLOPS sta
 upright 1.0 and pace 0.1 over 150-frame free runs of 1-s actions, `train_clops`; 28 minutes beside another
 training): on the tilt-fixed data `clops` alone let ClopsNav's 15-s forward walk sink (head over the last second
 1.12 m, bodies falling) and its actions carry 0.45 m of 0.91 asked; after `clops_upright` 1.47 m (lowest 1.03)
-and 0.71 m (`bench clops-actions`). The shipped default CLOPS prior is older than both (module doc of
-`train_clops`): its DQN policies act on it.
+and 0.71 m (`bench clops-actions`). `clops_upright` keeps the shipped prior's action deltas (`--actions-from
+shipped`): ClopsNav's policies act by action index, and the shipped ones were fine-tuned on this stage's prior
+with them (`motion-envs train dqn --init`; module doc of `train_clops`). It is the shipped CLOPS prior.
 
 The shipped WANDR prior is these four stages rerun on the data after cleanup turned back the Daz files' pelvis
 tilt (`motion_envs.data.cleanup`, step 3; `runs/priors_tilt`): pace 0.31 m left after 6 s (`bench wandr-pace`;
 the prior before 0.43, the data 0.30); the 8-s sampler (3,750 rollouts) SR 10.2% / FS 16.0% against the previous
 prior's 6.2% / 21.3%, the paced sampler 68.3% against 84.5%; head over the last second of a 15-s walk 1.44 m
-(1.45). GAMMA's and CLOPS's shipped priors were trained on the data before that step (each manifest's
-`data_hash` names its cache).
+(1.45). CLOPS's shipped prior is `clops_upright` on the same data; GAMMA's were trained on the data before that
+step (each manifest's `data_hash` names its cache).
 """
 
 from __future__ import annotations
@@ -93,8 +94,8 @@ RECIPE: tuple[Stage, ...] = (
     Stage("clops", ("clops", "--prior-init", "{clops_stage2}", "--max-rollout", "60", "--epochs", "6", "--window-stride", "2"),
           "clops.pt", 8, needs=("clops_stage2",), ships=False),
     Stage("clops_upright", ("clops", "--prior-init", "{clops}", "--max-rollout", "60", "--epochs", "4", "--window-stride", "2",
-                            "--learning-rate", "1e-4", "--upright-weight", "1.0", "--pace-weight", "0.1", "--pace-frames", "150"),
-          "clops.pt", 28, needs=("clops",)),
+                            "--learning-rate", "1e-4", "--upright-weight", "1.0", "--pace-weight", "0.1", "--pace-frames", "150",
+                            "--actions-from", "shipped"), "clops.pt", 28, needs=("clops",)),
     Stage("gamma_predictor_1f", ("gamma", "--stage", "predictor", "--seed-frames", "1", "--epochs", "8", "--rollout-epochs", "0"),
           "gamma_predictor_1f.pt", 5),
     Stage("gamma_predictor_2f", ("gamma", "--stage", "predictor", "--seed-frames", "2", "--epochs", "8", "--rollout-epochs", "0"),

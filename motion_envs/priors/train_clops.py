@@ -42,11 +42,17 @@ progress towards 1-s targets, as ClopsNav's. With it, from the tilt-fixed
 recipe prior (4 epochs, `--max-rollout 60`, lr 1e-4, upright 1.0, 150
 frames): pace 0.03 -> head 1.43 m (lowest 1.01) / travel 0.65 m; pace 0.1
 -> 1.47 m (1.03) / 0.71 m of 0.91 asked (the recipe's `clops_upright`
-stage; the same terms with the one 5-s target: 1.38 m / 0.22 m). The
-shipped open-family DQNs, trained on the default prior, reach 64% (vision
-only) and 77% (goal memory) of 100 held-out rooms on it with the default's
-action deltas copied in, against 78% and 91% on the default: a new default
-prior needs its DQNs retrained. The action clusters
+stage; the same terms with the one 5-s target: 1.38 m / 0.22 m). That
+stage is the shipped prior, with the previous shipped prior's action
+deltas (`actions_from`, the recipe's `--actions-from shipped`): DQNs
+trained from scratch (300k actions) on it with its own k-means set reached
+61% (vision only) / 66% (goal memory) of 100 held-out open rooms, the
+previous DQNs fine-tuned 100k actions on it with the kept set 62% / 85%
+(on the previous prior 78% / 91%; its 37° turning actions ask 1.07-1.12 m
+where the refit asks 0.74-0.77 m). What the upright prior still costs:
+its bodies walk slower (pelvis path 0.65 against 0.70 m/s under the
+vision-only policy), and 30% of that policy's episodes end at 15 s short
+of the goal (13% before). The action clusters
 (`fit_head_actions`) come from the same training clips, mirrored included,
 so they are left-right symmetric.
 """
@@ -85,6 +91,10 @@ class ClopsTrainConfig(WandrTrainConfig):
     kl_warmup_steps: int = 0
     init: Path | None = WEIGHTS_DIR / "wandr.pt"
     """WANDR (or CLOPS) weights to start from (None: from scratch)."""
+    actions_from: Path | None = None
+    """A CLOPS prior whose action deltas this one keeps (None: the k-means fit, `fit_head_actions`). ClopsNav
+    policies act by action index, so a prior that keeps the shipped set keeps the shipped policies' meaning; they
+    are then fine-tuned on it (`motion-envs train dqn --init`) rather than trained anew."""
     run_dir: Path = Path("runs/clops")
 
 
@@ -144,9 +154,11 @@ def train_clops(config: ClopsTrainConfig, train: WandrClips, validation: WandrCl
     model = ClopsPrior(config.model)
     if config.init is not None:
         start = initial_weights(config.init)
-        start.pop("actions", None)  # the action set is refitted below
+        start.pop("actions", None)  # the action set is chosen below
         model.load_state_dict({**model.state_dict(), **start})
-    model.set_actions(fit_head_actions(train, config.model.horizon, config.model.actions, config.seed))
+    actions = (fit_head_actions(train, config.model.horizon, config.model.actions, config.seed) if config.actions_from is None
+               else load_clops(config.actions_from).actions)  # fmt: skip
+    model.set_actions(actions)
     weights = config.output("clops.pt")
     return train_delta_prior(model, CLOPS_KIND, config, train, validation, lambda clips: HeadTargets(clips, config.model.horizon),
                              weights)  # fmt: skip

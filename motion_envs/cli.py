@@ -379,8 +379,8 @@ def _train_wandr(args: argparse.Namespace) -> int:
              "late_kl_weight": args.late_kl_weight, "kl_raise_epoch": args.kl_raise_epoch,
              "weights": weights_destination(name, run_dir, args.weights, args.ship), "run_dir": run_dir, "init": _prior_init(args),
              "far_goal_probability": args.far_goal_probability, "contact_weight": args.contact_weight,
-             "pace_weight": args.pace_weight, "upright_weight": args.upright_weight, "pace_frames": args.pace_frames,
-             "learning_rate": args.learning_rate}  # fmt: skip
+             "pace_weight": args.pace_weight, "upright_weight": args.upright_weight, "turn_weight": args.turn_weight,
+             "pace_frames": args.pace_frames, "learning_rate": args.learning_rate}  # fmt: skip
     config = WandrTrainConfig(model=model, data_hash=dataset.path.stem, command="motion-envs " + " ".join(sys.argv[1:]),
                               **{key: value for key, value in given.items() if value is not None})  # fmt: skip
     entry = train_wandr(config, train_clips, validation_clips)
@@ -406,7 +406,8 @@ def _train_clops(args: argparse.Namespace) -> int:
     given = {"epochs": args.epochs, "batch_size": args.batch_size, "window_stride": args.window_stride, "seed": args.seed,
              "max_rollout": args.max_rollout, "kl_weight": args.kl_weight, "weights": args.weights, "run_dir": args.run_dir,
              "ship": args.ship or None, "contact_weight": args.contact_weight, "pace_weight": args.pace_weight,
-             "upright_weight": args.upright_weight, "pace_frames": args.pace_frames, "learning_rate": args.learning_rate}  # fmt: skip
+             "upright_weight": args.upright_weight, "turn_weight": args.turn_weight, "pace_frames": args.pace_frames,
+             "learning_rate": args.learning_rate}  # fmt: skip
     if args.prior_init is not None:
         given["init"] = _prior_init(args)
     if args.actions_from is not None:
@@ -617,6 +618,9 @@ def parser() -> argparse.ArgumentParser:
     train.add_argument("--upright-weight", type=float, default=None,
                        help="wandr, clops: weight of the upright term (the same rollouts' head height above the feet pulled "
                             "to the data's; default 0, off)")  # fmt: skip
+    train.add_argument("--turn-weight", type=float, default=None,
+                       help="wandr, clops: weight of the turn term (the same rollouts' heading gap to the goal frame's "
+                            "pulled to the data's; default 0, off)")  # fmt: skip
     train.add_argument("--pace-frames", type=int, default=None,
                        help="wandr, clops: frames of each pace / upright rollout (default 90)")
     train.add_argument("--device", default=None, help="ppo, dqn: where the policy and the prior run (default cpu; cuda)")

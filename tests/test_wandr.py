@@ -247,10 +247,10 @@ def test_the_free_running_terms_pull_sampled_rollouts_towards_the_datas_progress
     config = WandrTrainConfig(model=WandrConfig(layers=3, max_width=64), epochs=2, batch_size=16, max_rollout=1,
                               pace_frames=10, run_dir=tmp_path / "run", weights=tmp_path / "plain.pt")  # fmt: skip
     plain_entry = train_wandr(config, clips, clips)
-    tuned = dataclasses.replace(config, epochs=3, init=config.weights, pace_weight=30.0, upright_weight=30.0, pace_windows=16,
-                                run_dir=tmp_path / "tuned", weights=tmp_path / "tuned.pt")  # fmt: skip
+    tuned = dataclasses.replace(config, epochs=3, init=config.weights, pace_weight=30.0, upright_weight=30.0, turn_weight=30.0,
+                                pace_windows=16, run_dir=tmp_path / "tuned", weights=tmp_path / "tuned.pt")  # fmt: skip
     tuned_entry = train_wandr(tuned, clips, clips)
-    control = dataclasses.replace(tuned, pace_weight=0.0, upright_weight=0.0, run_dir=tmp_path / "control",
+    control = dataclasses.replace(tuned, pace_weight=0.0, upright_weight=0.0, turn_weight=0.0, run_dir=tmp_path / "control",
                                   weights=tmp_path / "control.pt")  # the same fine-tune without the terms
     train_wandr(control, clips, clips)
     starts = clips.window_starts(10)[::7]
@@ -263,10 +263,23 @@ def test_the_free_running_terms_pull_sampled_rollouts_towards_the_datas_progress
 
     before, after = gaps(control.weights), gaps(tuned.weights)
     assert after["pace"] < 0.85 * before["pace"] and after["upright"] < 0.85 * before["upright"]
-    for name in ("pace", "upright"):
-        assert tuned_entry[f"validation_{name}_gap_cm_10_frames"] < plain_entry[f"validation_{name}_gap_cm_10_frames"]
+    assert after["turn"] < 0.85 * before["turn"]
+    for name in ("pace_gap_cm", "upright_gap_cm", "turn_gap_crad"):
+        assert tuned_entry[f"validation_{name}_10_frames"] < plain_entry[f"validation_{name}_10_frames"]
     with pytest.raises(ValueError, match="upright_weight"):
         WandrTrainConfig(upright_weight=-1.0)
+
+
+def test_ground_yaw_and_its_wrapped_difference():
+    from motion_envs.priors.train_wandr import ground_yaw, yaw_difference
+
+    angles = torch.tensor([0.0, 0.5, -2.0, 3.0])
+    cos, sin = angles.cos(), angles.sin()
+    about_z = torch.zeros(4, 3, 3)  # rotations about the vertical: the pelvis forward (column 1) turns with them
+    about_z[:, 0, 0], about_z[:, 0, 1], about_z[:, 1, 0], about_z[:, 1, 1], about_z[:, 2, 2] = cos, -sin, sin, cos, 1.0
+    yaw = ground_yaw(about_z)
+    assert torch.allclose(yaw_difference(yaw, ground_yaw(torch.eye(3).expand(4, 3, 3))), angles, atol=1e-6)
+    assert torch.allclose(yaw_difference(torch.tensor([3.0]), torch.tensor([-3.0])), torch.tensor([6.0 - 2 * torch.pi]))
 
 
 def test_a_learned_prior_starts_as_n01_then_learns_from_the_condition(walking_motion_30fps, body, tmp_path):

@@ -39,7 +39,9 @@ Reads top to bottom: clips -> windows with hallucinated goals -> statistics
   distance to the data's pelvis at the goal frame towards the data's own
   distance at the same frame: it asks for the data's progress, not its path
   (`free_run_terms`, which also holds `upright_weight`'s term: the head's
-  height above the feet against the data's).
+  height above the feet against the data's, and `turn_weight`'s: the
+  pelvis's heading gap to the goal frame's against the data's, the pace of
+  turning, which the pelvis distance hardly sees).
   Measured (shipped prior fine-tuned 4 epochs with the `wandr` stage's
   settings, lr 1e-4, 90-frame pace rollouts; `bench wandr-pace`): weight
   0.01 / 0.03 leave 0.44 / 0.37 m to go after 6 s (shipped 0.80, the data
@@ -108,6 +110,8 @@ class WandrTrainConfig(TrainRun):
     """Weight of `free_run_terms`' pace (cm², like the joint term; 0: off). See the module doc."""
     upright_weight: float = 0.0
     """Weight of `free_run_terms`' upright gap (cm²; 0: off)."""
+    turn_weight: float = 0.0
+    """Weight of `free_run_terms`' turn gap (centiradians², like the cm² terms; 0: off)."""
     pace_frames: int = 90
     """Frames of each free-running rollout (its windows have a goal at least this far ahead)."""
     pace_windows: int = 64
@@ -117,14 +121,15 @@ class WandrTrainConfig(TrainRun):
     run_dir: Path = Path("runs/wandr")
 
     def __post_init__(self) -> None:
-        if min(self.pace_weight, self.upright_weight) < 0 or self.pace_frames < 1 or self.pace_windows < 1:
-            raise ValueError(f"pace_weight and upright_weight must be ≥ 0 and pace_frames, pace_windows ≥ 1, got "
-                             f"{self.pace_weight}, {self.upright_weight}, {self.pace_frames}, {self.pace_windows}")  # fmt: skip
+        if min(self.pace_weight, self.upright_weight, self.turn_weight) < 0 or self.pace_frames < 1 or self.pace_windows < 1:
+            raise ValueError(f"pace_weight, upright_weight and turn_weight must be ≥ 0 and pace_frames, pace_windows ≥ 1, "
+                             f"got {self.pace_weight}, {self.upright_weight}, {self.turn_weight}, {self.pace_frames}, "
+                             f"{self.pace_windows}")  # fmt: skip
 
     @property
     def free_running(self) -> bool:
         """Whether batches roll windows out with z ~ N(0, I) (`free_run_terms`)."""
-        return self.pace_weight > 0 or self.upright_weight > 0
+        return self.pace_weight > 0 or self.upright_weight > 0 or self.turn_weight > 0
 
     def rollout_limit(self, epoch: int) -> int:
         """k of the schedule: 1 at the start, `max_rollout` from half-way on."""
@@ -294,16 +299,18 @@ def free_run_terms(model: WandrPrior, clips: WandrClips, targets: HindsightTarge
     * pace: how far the pelvis is from its goal (on the ground, to the data's pelvis at the goal frame) against how
       far the data's is at the same frame;
     * upright: the head's height above the lowest ankle or foot joint against the data's at the same frame.
+    * turn: how far the pelvis's heading is from the goal frame's (ground yaw, centiradians) against how far the
+      data's is at the same frame: the pace term's progress for turning, which moves the pelvis little.
 
     The gradient reaches each frame's delta only (the state it starts from is detached): back-propagated through
     the whole rollout, the pace term blew the fine-tune up within two epochs (training loss 16 -> 1,125,
     reconstruction 1.4 -> 744, at weights 0.003 and 0.01)."""
     run_goal_frames = targets.goal_frames(starts, frames, generator)
     state = clips.state(starts)
-    totals = {"pace": 0.0, "upright": 0.0}
+    totals = {"pace": 0.0, "upright": 0.0, "turn": 0.0}
     for step in range(frames):
         goal_frames = targets.free_run_goal_frames(starts, step, frames, run_goal_frames)
-        goal = clips.joints[goal_frames, PELVIS, :2]
+        goal, goal_yaw = clips.joints[goal_frames, PELVIS, :2], ground_yaw(clips.orient[goal_frames])
         cond = model.normalise_condition(condition(state, targets.features(state, starts + step, goal_frames)))
         noise = torch.randn(len(starts), model.config.latent, generator=generator)
         delta = model.denormalise_delta(model.generate(noise, cond))
@@ -313,8 +320,22 @@ def free_run_terms(model: WandrPrior, clips: WandrClips, targets: HindsightTarge
         totals["pace"] = totals["pace"] + ((left - (data[:, PELVIS, :2] - goal).norm(dim=-1)) * 100.0).pow(2).mean()
         gap = head_height(state.joints) - head_height(data)
         totals["upright"] = totals["upright"] + (gap * 100.0).pow(2).mean()
+        turn_left = yaw_difference(goal_yaw, ground_yaw(state.orient)).abs()
+        data_turn_left = yaw_difference(goal_yaw, ground_yaw(clips.orient[starts + step + 1])).abs()
+        totals["turn"] = totals["turn"] + ((turn_left - data_turn_left) * 100.0).pow(2).mean()
         state = WandrState(*(value.detach() for value in state))
     return {name: total / frames for name, total in totals.items()}
+
+
+def ground_yaw(orient: torch.Tensor) -> torch.Tensor:
+    """(B,) the ground heading angle (rad) of pelvis rotations (B, 3, 3): the angle of `goal_heading`."""
+    forward = goal_heading(orient)
+    return torch.atan2(forward[:, 1], forward[:, 0])
+
+
+def yaw_difference(target: torch.Tensor, current: torch.Tensor) -> torch.Tensor:
+    """(B,) target - current heading angles wrapped to [-pi, pi)."""
+    return torch.remainder(target - current + torch.pi, 2 * torch.pi) - torch.pi
 
 
 def head_height(joints: torch.Tensor) -> torch.Tensor:
@@ -365,7 +386,8 @@ def validate(model: WandrPrior, clips: WandrClips, targets: HindsightTargets, co
     if len(starts):
         starts = starts[torch.linspace(0, len(starts) - 1, min(max_windows // 4, len(starts))).long()]
         for name, value in free_run_terms(model, clips, targets, starts, config.pace_frames, body, generator).items():
-            figures[f"validation_{name}_gap_cm_{config.pace_frames}_frames"] = round(float(value.sqrt()), 2)
+            unit = "crad" if name == "turn" else "cm"  # the turn gap is an angle (centiradians)
+            figures[f"validation_{name}_gap_{unit}_{config.pace_frames}_frames"] = round(float(value.sqrt()), 2)
     model.train()
     return figures
 
@@ -423,10 +445,11 @@ def train_delta_prior(model: WandrPrior, kind: str, config: WandrTrainConfig, tr
         terms = rollout_terms(model, train, train_targets, starts, goal_frames, steps, body, config.free_bits)
         beta = config.kl_beta(step_number, epoch)
         terms |= (free_run_terms(model, train, train_targets, paced, config.pace_frames, body) if len(paced)
-                  else {"pace": torch.zeros(()), "upright": torch.zeros(())})  # fmt: skip
+                  else {"pace": torch.zeros(()), "upright": torch.zeros(()), "turn": torch.zeros(())})  # fmt: skip
         total = (terms["recon"] + terms["joints"] + beta * terms["kl"] + config.contact_weight * terms["contact"]
-                 + config.pace_weight * terms["pace"] + config.upright_weight * terms["upright"])  # fmt: skip
-        return {"total": total} | {name: terms[name] for name in ("recon", "joints", "kl", "contact", "pace", "upright")}
+                 + config.pace_weight * terms["pace"] + config.upright_weight * terms["upright"]
+                 + config.turn_weight * terms["turn"])  # fmt: skip
+        return {"total": total} | {name: terms[name] for name in ("recon", "joints", "kl", "contact", "pace", "upright", "turn")}
 
     history = fit(model, optimiser, config.fit_settings(kind), epoch_batches, loss_terms,
                   lambda epoch: f"rollout ≤ {config.rollout_limit(epoch)}")  # fmt: skip

@@ -17,8 +17,9 @@ What it showed (AMX Xeon, 8 rooms): the prior retrained on the cleaned data
 actions run out of frames; the default prior it was meant to replace 0.83 m
 of 1.10 m. It is why ClopsNav DQNs trained on the clean prior learn less in
 the same number of actions (README, ClopsNav). The shipped upright prior
-(`clops_upright`, the replaced default's action set): 0.84 m of 1.10 m, but
-its short turning actions take 20-28 frames against 13-20 (AVX-512 EPYC).
+(`clops_upright`, the replaced default's action set): 0.82 m of 1.10 m, its
+short turning actions 16-20 frames against the replaced default's 13-20
+(without its turn term 20-28; AVX-512 EPYC).
 Writes `benchmarks/results/clops_actions.md`.
 """
 

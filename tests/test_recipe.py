@@ -94,7 +94,7 @@ def test_the_default_wandr_prior_is_the_pace_tuned_one_and_its_policy_was_fine_t
 
 
 def test_the_default_clops_prior_is_the_upright_one_and_its_policies_were_fine_tuned_on_it(tmp_path, monkeypatch):
-    """The shipped CLOPS prior is the recipe's `clops_upright` stage (free-running upright and pace terms) keeping
+    """The shipped CLOPS prior is the recipe's `clops_upright` stage (free-running upright, pace and turn terms) keeping
     the shipped action deltas, so that the ClopsNav policies' action indices keep their meaning; each DQN record
     names its fine-tune from the file it replaced on that prior, its file no longer names a prior (it acts in the
     default one), and played from any directory the goal-memory policy finds the goal in held-out rooms."""
@@ -106,7 +106,8 @@ def test_the_default_clops_prior_is_the_upright_one_and_its_policies_were_fine_t
     assert shipped[0].command[shipped[0].command.index("--actions-from") + 1] == "shipped"
     manifest = json.loads((WEIGHTS_DIR / "manifest.json").read_text())
     prior = manifest["clops.pt"]
-    assert "--upright-weight" in prior["command"] and prior["actions"] and prior["replaces"]["why"] and prior["note"]
+    assert "--upright-weight" in prior["command"] and "--turn-weight" in prior["command"] and "--turn-weight" in shipped[0].command
+    assert prior["actions"] and prior["replaces"]["why"] and prior["note"]
     for name in ("dqn_clopsnav_open.zip", "dqn_clopsnav_open_memory.zip", "dqn_clopsnav_open_known_goal.zip",
                  "dqn_clopsnav_mixed.zip"):  # fmt: skip
         command = manifest[name]["config"]["command"]

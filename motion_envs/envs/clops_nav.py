@@ -207,7 +207,7 @@ class ClopsNavConfig:
     the pelvis lower than this (m); that frame is not taken, so the body stays at its last upright frame and no
     shown frame has the pelvis below the issue's 0.3 m. The previous prior let bodies fall and stay down (under
     uniform random actions 16 of 128 bodies had the pelvis below 0.3 m within 15 actions, most after frame 300;
-    with the shipped upright prior 1% of random-action episodes and 3-5% of the policies' end so, `bench clops`), and a
+    with the shipped upright prior 2% of random-action episodes and 3-8% of the policies' end so, `bench clops`), and a
     body lying on the floor is no walk to learn from or to show, as Gymnasium's Humanoid ends an episode when its
     torso leaves its healthy height. 0: off (the raw prior, as `bench floor`'s sinking rows measure it)."""
     known_goal: bool = False

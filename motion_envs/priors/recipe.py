@@ -26,12 +26,12 @@ ahead; after the 60-frame fine-tune ~20° and 1.13 m; a goal 15 m ahead, the iss
 alone (1.3 s a batch; the measured run shared the cores with a data build: 34 minutes); `wandr`'s 24 were measured
 beside another training on the other core, as were `wandr_paced`'s 23. CLOPS starts from `wandr_short`, as its shipped prior did, and gets the same fine-tune
 (`clops`: rollouts of up to 60 frames, 8 minutes measured alone), then its own free-running terms (`clops_upright`:
-upright 1.0 and pace 0.1 over 150-frame free runs of 1-s actions, `train_clops`; 28 minutes beside another
-training): on the tilt-fixed data `clops` alone let ClopsNav's 15-s forward walk sink (head over the last second
-1.12 m, bodies falling) and its actions carry 0.45 m of 0.91 asked; after `clops_upright` 1.47 m (lowest 1.03)
-and 0.71 m (`bench clops-actions`). `clops_upright` keeps the shipped prior's action deltas (`--actions-from
-shipped`): ClopsNav's policies act by action index, and the shipped ones were fine-tuned on this stage's prior
-with them (`motion-envs train dqn --init`; module doc of `train_clops`). It is the shipped CLOPS prior.
+upright 1.0, pace 0.1 and turn 0.1 over 150-frame free runs of 1-s actions, `train_clops`; 23 minutes beside
+another training): on the tilt-fixed data `clops` alone let ClopsNav's 15-s forward walk sink (head over the last
+second 1.12 m, bodies falling); after `clops_upright` 1.48 m (lowest 1.09; without the turn term 1.41 m, and its
+small turning actions were slow: module doc of `train_clops`). `clops_upright` keeps the shipped prior's action
+deltas (`--actions-from shipped`): ClopsNav's policies act by action index, and the shipped ones were fine-tuned
+with them (`motion-envs train dqn --init`). It is the shipped CLOPS prior.
 
 The shipped WANDR prior is these four stages rerun on the data after cleanup turned back the Daz files' pelvis
 tilt (`motion_envs.data.cleanup`, step 3; `runs/priors_tilt`): pace 0.31 m left after 6 s (`bench wandr-pace`;
@@ -94,8 +94,8 @@ RECIPE: tuple[Stage, ...] = (
     Stage("clops", ("clops", "--prior-init", "{clops_stage2}", "--max-rollout", "60", "--epochs", "6", "--window-stride", "2"),
           "clops.pt", 8, needs=("clops_stage2",), ships=False),
     Stage("clops_upright", ("clops", "--prior-init", "{clops}", "--max-rollout", "60", "--epochs", "4", "--window-stride", "2",
-                            "--learning-rate", "1e-4", "--upright-weight", "1.0", "--pace-weight", "0.1", "--pace-frames", "150",
-                            "--actions-from", "shipped"), "clops.pt", 28, needs=("clops",)),
+                            "--learning-rate", "1e-4", "--upright-weight", "1.0", "--pace-weight", "0.1", "--turn-weight", "0.1",
+                            "--pace-frames", "150", "--actions-from", "shipped"), "clops.pt", 23, needs=("clops",)),
     Stage("gamma_predictor_1f", ("gamma", "--stage", "predictor", "--seed-frames", "1", "--epochs", "8", "--rollout-epochs", "0"),
           "gamma_predictor_1f.pt", 5),
     Stage("gamma_predictor_2f", ("gamma", "--stage", "predictor", "--seed-frames", "2", "--epochs", "8", "--rollout-epochs", "0"),

@@ -270,16 +270,13 @@ def test_the_free_running_terms_pull_sampled_rollouts_towards_the_datas_progress
         WandrTrainConfig(upright_weight=-1.0)
 
 
-def test_ground_yaw_and_its_wrapped_difference():
-    from motion_envs.priors.train_wandr import ground_yaw, yaw_difference
+def test_the_turn_term_measures_wrapped_ground_yaw_between_rotations():
+    from motion_envs.body.rotations import about_z
+    from motion_envs.priors.clops import yaw_change  # what free_run_terms' turn term measures
 
     angles = torch.tensor([0.0, 0.5, -2.0, 3.0])
-    cos, sin = angles.cos(), angles.sin()
-    about_z = torch.zeros(4, 3, 3)  # rotations about the vertical: the pelvis forward (column 1) turns with them
-    about_z[:, 0, 0], about_z[:, 0, 1], about_z[:, 1, 0], about_z[:, 1, 1], about_z[:, 2, 2] = cos, -sin, sin, cos, 1.0
-    yaw = ground_yaw(about_z)
-    assert torch.allclose(yaw_difference(yaw, ground_yaw(torch.eye(3).expand(4, 3, 3))), angles, atol=1e-6)
-    assert torch.allclose(yaw_difference(torch.tensor([3.0]), torch.tensor([-3.0])), torch.tensor([6.0 - 2 * torch.pi]))
+    assert torch.allclose(yaw_change(torch.eye(3).expand(4, 3, 3), about_z(angles)), angles, atol=1e-6)
+    assert torch.allclose(yaw_change(about_z(torch.tensor([-3.0])), about_z(torch.tensor([3.0]))), torch.tensor([6.0 - 2 * torch.pi]))
 
 
 def test_a_learned_prior_starts_as_n01_then_learns_from_the_condition(walking_motion_30fps, body, tmp_path):

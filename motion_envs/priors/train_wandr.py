@@ -70,6 +70,7 @@ from motion_envs.body.rotations import rotation_matrix
 from motion_envs.data.dataset import MotionDataset
 from motion_envs.data.motion import BodyMotion
 from motion_envs.priors.training import WEIGHTS_DIR, TrainRun, fit, load_shipped, minibatches, seed_everything, ship
+from motion_envs.priors.clops import yaw_change
 from motion_envs.priors.wandr import WandrConfig, WandrPrior
 from motion_envs.body.markers import sole_vertex_ids
 from motion_envs.data.paths import SHIPPED_SUBSETS
@@ -310,7 +311,7 @@ def free_run_terms(model: WandrPrior, clips: WandrClips, targets: HindsightTarge
     totals = {"pace": 0.0, "upright": 0.0, "turn": 0.0}
     for step in range(frames):
         goal_frames = targets.free_run_goal_frames(starts, step, frames, run_goal_frames)
-        goal, goal_yaw = clips.joints[goal_frames, PELVIS, :2], ground_yaw(clips.orient[goal_frames])
+        goal, goal_orient = clips.joints[goal_frames, PELVIS, :2], clips.orient[goal_frames]
         cond = model.normalise_condition(condition(state, targets.features(state, starts + step, goal_frames)))
         noise = torch.randn(len(starts), model.config.latent, generator=generator)
         delta = model.denormalise_delta(model.generate(noise, cond))
@@ -320,22 +321,11 @@ def free_run_terms(model: WandrPrior, clips: WandrClips, targets: HindsightTarge
         totals["pace"] = totals["pace"] + ((left - (data[:, PELVIS, :2] - goal).norm(dim=-1)) * 100.0).pow(2).mean()
         gap = head_height(state.joints) - head_height(data)
         totals["upright"] = totals["upright"] + (gap * 100.0).pow(2).mean()
-        turn_left = yaw_difference(goal_yaw, ground_yaw(state.orient)).abs()
-        data_turn_left = yaw_difference(goal_yaw, ground_yaw(clips.orient[starts + step + 1])).abs()
+        turn_left = yaw_change(state.orient, goal_orient).abs()
+        data_turn_left = yaw_change(clips.orient[starts + step + 1], goal_orient).abs()
         totals["turn"] = totals["turn"] + ((turn_left - data_turn_left) * 100.0).pow(2).mean()
         state = WandrState(*(value.detach() for value in state))
     return {name: total / frames for name, total in totals.items()}
-
-
-def ground_yaw(orient: torch.Tensor) -> torch.Tensor:
-    """(B,) the ground heading angle (rad) of pelvis rotations (B, 3, 3): the angle of `goal_heading`."""
-    forward = goal_heading(orient)
-    return torch.atan2(forward[:, 1], forward[:, 0])
-
-
-def yaw_difference(target: torch.Tensor, current: torch.Tensor) -> torch.Tensor:
-    """(B,) target - current heading angles wrapped to [-pi, pi)."""
-    return torch.remainder(target - current + torch.pi, 2 * torch.pi) - torch.pi
 
 
 def head_height(joints: torch.Tensor) -> torch.Tensor:

@@ -96,8 +96,9 @@ def test_the_default_wandr_prior_is_the_pace_tuned_one_and_its_policy_was_fine_t
 def test_the_default_clops_prior_is_the_upright_one_and_its_policies_were_fine_tuned_on_it(tmp_path, monkeypatch):
     """The shipped CLOPS prior is the recipe's `clops_upright` stage (free-running upright, pace and turn terms) keeping
     the shipped action deltas, so that the ClopsNav policies' action indices keep their meaning; each DQN record
-    names its fine-tune from the file it replaced on that prior, its file no longer names a prior (it acts in the
-    default one), and played from any directory the goal-memory policy finds the goal in held-out rooms."""
+    names its fine-tune from the file it replaced (on this prior, or on its predecessor and promoted), its file
+    names no prior (it acts in the default one), and played from any directory the goal-memory policy finds the
+    goal in held-out rooms."""
     from motion_envs.play import play, policy_env_kwargs
     from motion_envs.priors.training import WEIGHTS_DIR
 
@@ -110,8 +111,8 @@ def test_the_default_clops_prior_is_the_upright_one_and_its_policies_were_fine_t
     assert prior["actions"] and prior["replaces"]["why"] and prior["note"]
     for name in ("dqn_clopsnav_open.zip", "dqn_clopsnav_open_memory.zip", "dqn_clopsnav_open_known_goal.zip",
                  "dqn_clopsnav_mixed.zip"):  # fmt: skip
-        command = manifest[name]["config"]["command"]
-        assert "--init" in command and "--env-option weights=" in command and manifest[name]["promoted"], name
+        command = manifest[name]["config"]["command"]  # fine-tuned on the default prior, or on another and promoted
+        assert "--init" in command and ("--env-option weights=" not in command or manifest[name]["promoted"]), name
         assert "weights" not in policy_env_kwargs("motion_envs/ClopsNav-v0", WEIGHTS_DIR / name)[1], name
     monkeypatch.chdir(tmp_path)
     summaries = play("motion_envs/ClopsNav-v0", WEIGHTS_DIR / "dqn_clopsnav_open_memory.zip", episodes=4, split="test")

@@ -28,8 +28,8 @@ from scratch: 2.07 m left after 4 s) moved the lag (`wandr_grid`'s module doc ha
 their grid figures). A pace term in training does (`train wandr
 --pace-weight`, `priors/train_wandr.py`: 0.80 -> 0.44 / 0.37 m left after
 6 s at weights 0.01 / 0.03, the data 0.34), at the cost of 15-s walks that
-sink more unless an upright term comes with it (0.43 m; the shipped prior
-since, the recipe's `wandr_paced` stage); the table in
+sink more unless an upright term comes with it (0.43 m; the recipe's
+`wandr_paced` stage, which `wandr_upright` fine-tunes further); the table in
 `results/wandr_pace.md` compares them.
 """
 

@@ -79,7 +79,7 @@ def test_the_default_wandr_prior_is_the_pace_tuned_one_and_its_policy_was_fine_t
     from motion_envs.priors.training import WEIGHTS_DIR
 
     shipped = [stage for stage in recipe.RECIPE if stage.weights == "wandr.pt" and stage.ships]
-    assert [stage.name for stage in shipped] == ["wandr_paced"] and "--pace-weight" in shipped[0].command
+    assert [stage.name for stage in shipped] == ["wandr_upright"] and "--pace-weight" in shipped[0].command
     manifest = json.loads((WEIGHTS_DIR / "manifest.json").read_text())
     prior, policy = manifest["wandr.pt"], manifest["ppo_wandrreach_alpha1_default.zip"]
     assert "--pace-weight" in prior["command"] and "--upright-weight" in prior["command"] and prior["data_hash"]

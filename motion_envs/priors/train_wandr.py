@@ -50,9 +50,12 @@ Reads top to bottom: clips -> windows with hallucinated goals -> statistics
   1.24 m, lowest head 0.98 -> 0.47 / 0.18 m): the faster gait folds some
   bodies. With the upright term as well (pace 0.03, upright 0.3): 0.43 m
   left after 6 s and the 15-s walk's head at 1.45 m (lowest 1.23 m): the
-  recipe's `wandr_paced` stage. The shipped prior is the recipe rerun on the
-  data with the Daz files' pelvis tilt turned back (cleanup step 3): 0.31 m
-  left after 6 s (the data 0.30), head over the 15th second 1.44 m (lowest 1.18 m).
+  recipe's `wandr_paced` stage. Rerun on the data with the Daz files' pelvis
+  tilt turned back (cleanup step 3): 0.31 m left after 6 s (the data 0.30),
+  head over the 15th second 1.44 m (lowest 1.18 m); fine-tuned again with the
+  upright term at 1.0 (`wandr_upright`, the shipped prior): 0.33 m, head
+  1.48 m (lowest 1.26 m); with upright 0.3 and the turn term at 0.1 instead,
+  1.40 m (lowest 0.14 m).
 """
 
 from __future__ import annotations

@@ -80,6 +80,11 @@ class Stage:
         return self.run_dir(root) / self.weights
 
 
+WANDR_FREE_RUN_FINE_TUNE = ("--epochs", "4", "--max-rollout", "120", "--window-stride", "2", "--late-kl-weight", "0.1",
+                            "--kl-raise-epoch", "0", "--pace-weight", "0.03", "--learning-rate", "1e-4")
+"""The WANDR stages after `wandr` (free-running pace term, 120-frame rollouts); each adds its upright weight."""
+
+
 RECIPE: tuple[Stage, ...] = (
     Stage("wandr_short", ("wandr", "--epochs", "40", "--window-stride", "2", "--late-kl-weight", "0.1", "--kl-raise-epoch", "22"),
           "wandr.pt", 20, ships=False),
@@ -87,12 +92,10 @@ RECIPE: tuple[Stage, ...] = (
                        "--late-kl-weight", "0.1", "--kl-raise-epoch", "0"), "wandr.pt", 10, needs=("wandr_short",), ships=False),
     Stage("wandr", ("wandr", "--prior-init", "{wandr_60}", "--epochs", "6", "--max-rollout", "120", "--window-stride", "2",
                     "--late-kl-weight", "0.1", "--kl-raise-epoch", "0"), "wandr.pt", 24, needs=("wandr_60",), ships=False),
-    Stage("wandr_paced", ("wandr", "--prior-init", "{wandr}", "--epochs", "4", "--max-rollout", "120", "--window-stride", "2",
-                          "--late-kl-weight", "0.1", "--kl-raise-epoch", "0", "--pace-weight", "0.03", "--upright-weight", "0.3",
-                          "--learning-rate", "1e-4"), "wandr.pt", 23, needs=("wandr",), ships=False),
-    Stage("wandr_upright", ("wandr", "--prior-init", "{wandr_paced}", "--epochs", "4", "--max-rollout", "120", "--window-stride",
-                            "2", "--late-kl-weight", "0.1", "--kl-raise-epoch", "0", "--pace-weight", "0.03", "--upright-weight",
-                            "1.0", "--learning-rate", "1e-4"), "wandr.pt", 16, needs=("wandr_paced",)),
+    Stage("wandr_paced", ("wandr", "--prior-init", "{wandr}", *WANDR_FREE_RUN_FINE_TUNE, "--upright-weight", "0.3"), "wandr.pt",
+          23, needs=("wandr",), ships=False),
+    Stage("wandr_upright", ("wandr", "--prior-init", "{wandr_paced}", *WANDR_FREE_RUN_FINE_TUNE, "--upright-weight", "1.0"),
+          "wandr.pt", 16, needs=("wandr_paced",)),
     Stage("clops_stage1", ("clops", "--prior-init", "{wandr_short}"), "clops.pt", 6, needs=("wandr_short",), ships=False),
     Stage("clops_stage2", ("clops", "--prior-init", "{clops_stage1}", "--max-rollout", "30", "--epochs", "6"), "clops.pt", 7,
           needs=("clops_stage1",), ships=False),

@@ -123,9 +123,9 @@ class BodyModel(nn.Module):
         conjugate_signs = [signs[i] * signs[j] for i in range(3) for j in range(3)]
         back_entries = [3 * inverse[i] + inverse[j] for i in range(3) for j in range(3)]
         back_signs = [signs[inverse[i]] * signs[inverse[j]] for i in range(3) for j in range(3)]
-        for name, values in (("conjugate_entries", conjugate_entries), ("conjugate_signs", conjugate_signs),
-                             ("back_entries", back_entries), ("back_signs", back_signs)):  # fmt: skip
+        for name, values in (("conjugate_entries", conjugate_entries), ("conjugate_signs", conjugate_signs)):
             self.register_buffer(name, torch.tensor(values), persistent=False)
+        self._back_entries, self._back_signs = back_entries, back_signs
 
     @property
     def num_vertices(self) -> int:
@@ -183,14 +183,26 @@ class BodyModel(nn.Module):
             levels.append(local[:, start - 1 : stop - 1] @ parents)  # (R_p L)ᵀ = Lᵀ R_pᵀ
         return self._posed(transl, torch.cat(levels, dim=1), batch)
 
-    def from_world_rotations(self, transl: torch.Tensor, rotations: torch.Tensor) -> BodyPose:
-        """The body with pelvis positions (..., 3) and world joint rotations (..., 22, 3, 3) (`BodyPose.rotations`),
-        without forward kinematics: for a pose whose world rotations are known (`leg_fit.fit_legs`)."""
-        batch = transl.shape[:-1]
-        if rotations.shape != (*batch, NUM_JOINTS, 3, 3):
-            raise ValueError(f"need rotations {(*batch, NUM_JOINTS, 3, 3)}, got {tuple(rotations.shape)}")
-        size = int(np.prod(batch)) if batch else 1
-        return self._posed(transl, rotations.reshape(size, NUM_JOINTS, 3, 3).transpose(-1, -2), batch)
+    def with_world_rotations(self, pose: BodyPose, transl: torch.Tensor, joint_ids: torch.Tensor,
+                             rotations: torch.Tensor) -> BodyPose:  # fmt: skip
+        """`pose` with the world rotations of the joints `joint_ids` (J,) replaced by `rotations` (3, 3, ..., J), in
+        the planes layout (components first, `leg_fit`'s), and the pelvis moved to `transl` (..., 3); the other
+        joints keep their world rotations (no forward kinematics: for rotations solved in world axes, as
+        `leg_fit.fit_legs`'s, whose joints have no other children) and every joint position is recomputed.
+
+        Written into a copy of `pose.frame_rows`, whose rows hold the rotations component by component, so the
+        planes go in with one strided copy; the returned rotations are a view of those rows (not contiguous)."""
+        if rotations.shape != (3, 3, *pose.joints.shape[:-2], len(joint_ids)):
+            raise ValueError(f"need rotations {(3, 3, *pose.joints.shape[:-2], len(joint_ids))}, "
+                             f"got {tuple(rotations.shape)}")  # fmt: skip
+        rows = pose.frame_rows.clone()
+        size = rows.shape[1] // 3
+        by_joint = rows[:-1].view(NUM_JOINTS, 3, size, 3)  # [j, b, n, a] = R_j[a, b]
+        by_joint[joint_ids] = rotations.reshape(3, 3, size, len(joint_ids)).permute(3, 1, 2, 0)
+        rows[-1] = transl.reshape(size * 3)
+        batch = pose.joints.shape[:-2]
+        rotations = by_joint.permute(2, 0, 3, 1).reshape(*batch, NUM_JOINTS, 3, 3)  # a view: [n, j, a, b]
+        return BodyPose(joints=self._joints_of_rows(rows, batch), rotations=rotations, frame_rows=rows)
 
     def _posed(self, transl: torch.Tensor, transposed: torch.Tensor, batch: torch.Size) -> BodyPose:
         """BodyPose from transposed world rotations (B, 22, 3, 3): [n, j, b, a] = R_j[a, b]."""
@@ -198,12 +210,14 @@ class BodyModel(nn.Module):
         rows = torch.cat(  # one pass: rearrange the rotations and append the pelvis
             [transposed.reshape(size, FRAME_ROWS - 1, 3).permute(1, 0, 2), transl.reshape(1, size, 3)], dim=0
         ).reshape(FRAME_ROWS, size * 3)
+        rotations = transposed.transpose(-1, -2).reshape(*batch, NUM_JOINTS, 3, 3)
+        return BodyPose(joints=self._joints_of_rows(rows, batch), rotations=rotations, frame_rows=rows)
+
+    def _joints_of_rows(self, rows: torch.Tensor, batch: torch.Size) -> torch.Tensor:
+        """(..., 22, 3) joint positions from `BodyPose.frame_rows` (67, B * 3): one matmul."""
+        size = rows.shape[1] // 3
         joints = (self.chain_rows.to(rows.dtype) @ rows).reshape(NUM_JOINTS, size, 3).transpose(0, 1)
-        return BodyPose(
-            joints=joints.reshape(*batch, NUM_JOINTS, 3),
-            rotations=transposed.transpose(-1, -2).reshape(*batch, NUM_JOINTS, 3, 3),
-            frame_rows=rows,
-        )
+        return joints.reshape(*batch, NUM_JOINTS, 3)
 
     def _root_transposed(self, global_orient: torch.Tensor) -> torch.Tensor:
         """(B, 3|6) -> (B, 3, 3) transposed pelvis rotation."""
@@ -229,9 +243,13 @@ class BodyModel(nn.Module):
         return _signed_gather(local, self.conjugate_entries, self.conjugate_signs)
 
     def smplx_local(self, local_world: torch.Tensor) -> torch.Tensor:
-        """(..., 3, 3) local rotations in world axes (parentᵀ @ child of world rotations) -> SMPL-X's own joint
-        axes, Aᵀ L A (`body_pose`'s convention; one gather, as `_world_axes_transposed` the other way)."""
-        return _signed_gather(local_world, self.back_entries, self.back_signs)
+        """(3, 3, ...) local rotations in world axes (parentᵀ @ child of world rotations) in the planes layout
+        (components first, `leg_fit`'s) -> (..., 3, 3) in SMPL-X's own joint axes, Aᵀ L A (`body_pose`'s
+        convention): the signed permutation of `_world_axes_transposed` the other way, as picked planes stacked
+        once into the matrices' layout."""
+        entries = [local_world[entry // 3, entry % 3] for entry in self._back_entries]
+        signed = [plane if sign > 0 else -plane for plane, sign in zip(entries, self._back_signs)]
+        return torch.stack(signed, dim=-1).unflatten(-1, (3, 3))
 
     def skin(self, pose: BodyPose, vertex_ids: torch.Tensor) -> torch.Tensor:
         """Linear-blend skinning of a vertex subset of a pose from `forward`.

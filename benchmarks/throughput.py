@@ -64,8 +64,10 @@ def matmul_flops(dtype: torch.dtype, size: int = 1024) -> float:
 if ONEDNN_LINEAR is not None:
 
     @register_flop_formula(ONEDNN_LINEAR)
-    def _onednn_linear_flops(x_shape, w_shape, *args, **kwargs) -> int:
-        """oneDNN's fused linear (x (..., in), weight (out, in)): the matmul's FLOPs, as torch counts `addmm`'s."""
+    def _onednn_linear_flops(x_shape, second_shape, third_shape, *args, **kwargs) -> int:
+        """oneDNN's fused linear: (x (..., in), weight (out, in), bias, ...) or, with a fused sum (`.binary`),
+        (x, summand (..., out), weight, ...): the matmul's FLOPs, as torch counts `addmm`'s."""
+        w_shape = third_shape if third_shape is not None and len(third_shape) == 2 else second_shape
         return 2 * math.prod(x_shape[:-1]) * w_shape[0] * w_shape[1]
 
 

@@ -190,8 +190,9 @@ def test_training_writes_to_its_run_folder_unless_shipped(walking_clips, tmp_pat
 def test_onednn_linears_match_the_plain_modules(generator, dtype):
     """The no-grad CPU path (oneDNN: matmul, bias and activation in one call) computes what the modules compute
     with autograd on (MKL's matmul, then the activation): fp32 to reassociation (1e-5 here), bf16 to its 3 digits.
-    Covers every layer kind the priors use: residual blocks, the tanh MLP, leaky-ReLU layers, a strided weight."""
-    from motion_envs.priors.gamma import PoseVAE, ResidualBlock, tanh_mlp
+    Covers every layer kind the priors use: residual blocks, the tanh MLP, leaky-ReLU layers, a strided weight, a sum
+    fused into the linear (`add`), and the regressor and the predictor's decoder, which fuse their sums that way."""
+    from motion_envs.priors.gamma import BodyRegressor, MarkerCVAE, MarkerCVAEConfig, PoseVAE, ResidualBlock, tanh_mlp
     from motion_envs.priors.inference_linear import ONEDNN_LINEAR, linear, takes_onednn
 
     x = torch.randn(64, 8, 128, generator=generator).to(dtype)
@@ -200,11 +201,17 @@ def test_onednn_linears_match_the_plain_modules(generator, dtype):
     tolerance = {"atol": 1e-5, "rtol": 1e-5} if dtype == torch.float32 else {"atol": 2e-2, "rtol": 2e-2}
     pose_vae = PoseVAE().to(dtype)
     weight = torch.randn(96, 300, generator=generator).to(dtype)
+    bias, summand = torch.randn(96, generator=generator).to(dtype), torch.randn(64, 96, generator=generator).to(dtype)
+    regressor, predictor = BodyRegressor().to(dtype), MarkerCVAE(MarkerCVAEConfig()).to(dtype)
+    latent = torch.randn(64, predictor.config.latent, generator=generator).to(dtype)
     cases = [
         (ResidualBlock(128).to(dtype), x),
         (tanh_mlp([128, 512, 256]).to(dtype), x),
         (lambda poses: pose_vae.encode(poses)[0], torch.randn(64, 21, 6, generator=generator).to(dtype)),
         (lambda rows: linear(rows, weight[:, 100:]), torch.randn(64, 200, generator=generator).to(dtype)),
+        (lambda rows: linear(rows, weight[:, :200], bias, add=summand), torch.randn(64, 200, generator=generator).to(dtype)),
+        (lambda markers: regressor(markers)["body_pose"], torch.randn(64, 67, 3, generator=generator).to(dtype)),
+        (lambda seed: predictor.decode(seed, latent), torch.randn(64, 2, 201, generator=generator).to(dtype)),
     ]
     for module, inputs in cases:
         with torch.enable_grad():

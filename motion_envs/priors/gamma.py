@@ -113,10 +113,11 @@ class MarkerCVAE(nn.Module):
         constant = linear(torch.cat([context, z], dim=-1), weight[:, :steady], bias)  # (B, 3·hidden)
         frame_weight = weight[:, steady:].contiguous()
         frames = []
+        features, output = self.readout[0], self.readout[1]
         for _ in range(self.config.future_frames):  # 8 or 9 steps of one primitive, batched over bodies
-            # sums added in place into fresh linear outputs (autograd needs no linear's output): no third tensor
-            state = self._cell(linear(previous, frame_weight).add_(constant), state)
-            previous = self.readout(state).add_(previous)
+            # the sums inside the linears (`linear`'s `add`): no separate pass over their outputs
+            state = self._cell(linear(previous, frame_weight, add=constant), state)
+            previous = linear(features(state), output.weight, output.bias, add=previous)
             frames.append(previous)
         return torch.stack(frames, dim=1)
 
@@ -226,8 +227,10 @@ class BodyRegressor(nn.Module):
         estimate = torch.zeros(flat.shape[0], BODY_DIM, dtype=flat.dtype, device=flat.device)
         entry, rest = self.net[0], self.net[1:]
         from_markers = linear(flat, entry.weight[:, :MARKER_DIM], entry.bias)  # the same in every recursion: once
+        blocks, exit_layer = rest[:-1], rest[-1]
         for _ in range(self.config.recursions):  # net([markers, estimate]), the first layer split by its inputs
-            estimate = rest(linear(estimate, entry.weight[:, MARKER_DIM:]).add_(from_markers)).add_(estimate)
+            hidden = blocks(linear(estimate, entry.weight[:, MARKER_DIM:], add=from_markers))
+            estimate = linear(hidden, exit_layer.weight, exit_layer.bias, add=estimate)  # the sums inside the linears
         batch = markers.shape[:-2]
         return {
             "transl": estimate[:, :3].reshape(*batch, 3),

@@ -7,6 +7,7 @@ import json
 import sys
 from pathlib import Path
 
+from motion_envs.allocator import keep_freed_memory
 from motion_envs.data.paths import SHIPPED_SUBSETS
 
 
@@ -797,6 +798,7 @@ def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in argv
     args = parser().parse_args([word for word in argv if word != "--debug"])
+    keep_freed_memory()  # every command steps or trains batches of the same large tensors (`motion_envs.allocator`)
     try:
         return int(args.run(args) or 0)
     except KeyboardInterrupt:

@@ -91,6 +91,7 @@ import gymnasium as gym
 import numpy as np
 import torch
 
+from motion_envs.allocator import keep_freed_memory
 from motion_envs.batched import where_bodies
 from motion_envs.body import BodyModel
 from motion_envs.body.collision_spheres import spheres_of_joints
@@ -316,6 +317,7 @@ class ClopsNavCore:
     """The batched task: start states, one action for N bodies, observations. Stateless: states go in and out."""
 
     def __init__(self, config: ClopsNavConfig, prior: ClopsPrior | None = None) -> None:
+        keep_freed_memory()  # large step tensors reused, not page-faulted anew (`motion_envs.allocator`)
         self.config = config
         self.device = torch.device(config.device)
         self.prior = (prior or load_clops(config.weights)).to(self.device).eval()

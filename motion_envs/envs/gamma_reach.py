@@ -95,6 +95,7 @@ import numpy as np
 import roma
 import torch
 
+from motion_envs.allocator import keep_freed_memory
 from motion_envs.batched import BatchedState
 from motion_envs.body import BodyModel
 from motion_envs.body.markers import foot_vertex_ids
@@ -227,6 +228,7 @@ class GammaReachCore:
     """The batched task: start states, one step for N bodies, observations. Stateless: states go in and out."""
 
     def __init__(self, config: GammaReachConfig, generator: GammaGenerator | None = None) -> None:
+        keep_freed_memory()  # large step tensors reused, not page-faulted anew (`motion_envs.allocator`)
         self.config = config
         self.device = torch.device(config.device)
         loaded = generator or (GammaGenerator.load(config.weights_dir) if config.weights_dir else GammaGenerator.load())

@@ -72,6 +72,7 @@ import gymnasium as gym
 import numpy as np
 import torch
 
+from motion_envs.allocator import keep_freed_memory
 from motion_envs.batched import BatchedState
 from motion_envs.body.canonical_frame import PELVIS
 from motion_envs.body.collision_spheres import spheres_of_joints
@@ -261,6 +262,7 @@ class GammaWanderCore:
     """The batched task over `GammaReachCore`: paths, waypoint switching, scene collisions. Stateless."""
 
     def __init__(self, config: GammaWanderConfig, generator: GammaGenerator | None = None) -> None:
+        keep_freed_memory()  # large step tensors reused, not page-faulted anew (`motion_envs.allocator`)
         self.config = config
         self.reach = GammaReachCore(config.reach_config(), generator)
         self.device = self.reach.device

@@ -94,6 +94,7 @@ import gymnasium as gym
 import numpy as np
 import torch
 
+from motion_envs.allocator import keep_freed_memory
 from motion_envs.batched import where_bodies
 from motion_envs.body import BodyModel
 from motion_envs.body.rotations import matrix_to_sixd
@@ -205,6 +206,7 @@ class WandrReachCore:
     """The batched task: start states, one step for N bodies, observations. Stateless: states go in and out."""
 
     def __init__(self, config: WandrReachConfig, prior: WandrPrior | None = None) -> None:
+        keep_freed_memory()  # large step tensors reused, not page-faulted anew (`motion_envs.allocator`)
         self.config = config
         self.device = torch.device(config.device)
         self.prior = (prior or load_wandr(config.weights)).to(self.device).eval()

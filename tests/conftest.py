@@ -14,11 +14,10 @@ from motion_envs.data.paths import default_mocap_dir
 
 TEST_THREADS = max(1, torch.get_num_threads() // int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")))
 """Intra-op threads of each test process: torch's default (the cores this process may use) shared out among
-pytest-xdist's workers. torch's default (one
-thread per core in every worker) oversubscribes the cores, and an OpenMP team waiting on a descheduled thread turns
-each small op into a time slice: the cleanup's 300-step IK on a 2.5-s clip took 26 s in a 2-worker run on 2 cores
-and 1.5 s on its own. Not passed on as OMP_NUM_THREADS: Ray keeps that for its workers, which then ran two
-threads each on the same two cores (the Ray half of the suite: 68 -> 183 s)."""
+pytest-xdist's workers. With the default in every worker the cores are oversubscribed, and an OpenMP team waiting on
+a descheduled thread turns each small op into a time slice: the cleanup's 300-step IK on a 2.5-s clip took 26 s in
+a 2-worker run on 2 cores and 1.5 s on its own. Not passed on as OMP_NUM_THREADS: Ray keeps that for its workers,
+which then ran two threads each on the same two cores (the Ray half of the suite: 68 -> 183 s)."""
 
 
 @pytest.fixture(autouse=True)

@@ -201,8 +201,8 @@ class BodyModel(nn.Module):
         by_joint[joint_ids] = rotations.reshape(3, 3, size, len(joint_ids)).permute(3, 1, 2, 0)
         rows[-1] = transl.reshape(size * 3)
         batch = pose.joints.shape[:-2]
-        rotations = by_joint.permute(2, 0, 3, 1).reshape(*batch, NUM_JOINTS, 3, 3)  # a view: [n, j, a, b]
-        return BodyPose(joints=self._joints_of_rows(rows, batch), rotations=rotations, frame_rows=rows)
+        world = by_joint.permute(2, 0, 3, 1).reshape(*batch, NUM_JOINTS, 3, 3)  # a view: [n, j, a, b]
+        return BodyPose(joints=self._joints_of_rows(rows, batch), rotations=world, frame_rows=rows)
 
     def _posed(self, transl: torch.Tensor, transposed: torch.Tensor, batch: torch.Size) -> BodyPose:
         """BodyPose from transposed world rotations (B, 22, 3, 3): [n, j, b, a] = R_j[a, b]."""

@@ -22,25 +22,27 @@ of sampled walking (trunk tilt 36° and growing, head 0.53 m over the 15th secon
 ahead; after the 60-frame fine-tune ~20° and 1.13 m; a goal 15 m ahead, the issue's protocol: 1.22 m after the
 60-frame fine-tune, 1.42 m after the 120-frame one). It still walked at half the data's pace (0.80 m left after
 6 s, the data 0.34): `wandr_paced` fine-tunes it with the free-running pace and upright terms
-(`train_wandr.free_run_terms`; 0.43 m, head 1.45 m over a 15-s walk's last second), and `wandr_upright` again
-with the upright term at 1.0 (head 1.48 m, lowest 1.26, where `wandr_paced` gave 1.44 and 1.18 on the tilt-fixed
-data; same pace). `wandr_60`'s 10 minutes are estimated from its last epochs alone (1.3 s a batch; the measured
-run shared the cores with a data build: 34 minutes); `wandr`'s 24 were measured beside another training on the
-other core, as were `wandr_paced`'s 23 and `wandr_upright`'s 16. CLOPS starts from `wandr_short`, as its shipped prior did, and gets the same fine-tune
-(`clops`: rollouts of up to 60 frames, 8 minutes measured alone), then its own free-running terms (`clops_upright`:
-upright 1.0, pace 0.1 and turn 0.1 over 150-frame free runs of 1-s actions, `train_clops`; 23 minutes beside
-another training): on the tilt-fixed data `clops` alone let ClopsNav's 15-s forward walk sink (head over the last
-second 1.12 m, bodies falling); after `clops_upright` 1.48 m (lowest 1.09; without the turn term 1.41 m, and its
-small turning actions were slow: module doc of `train_clops`). `clops_upright` keeps the shipped prior's action
-deltas (`--actions-from shipped`): ClopsNav's policies act by action index, and the shipped ones were fine-tuned
-with them (`motion-envs train dqn --init`). It is the shipped CLOPS prior.
+(`train_wandr.free_run_terms`; 0.43 m, head 1.45 m over a 15-s walk's last second), and `wandr_upright` again with
+the upright term at 1.0 (head 1.48 m, lowest 1.26, where `wandr_paced` gave 1.44 and 1.18 on the tilt-fixed data;
+same pace). `wandr_60`'s 10 minutes are estimated from its last epochs alone (1.3 s a batch; the measured run
+shared the cores with a data build: 34 minutes); `wandr`'s 24 were measured beside another training on the other
+core, as were `wandr_paced`'s 23 and `wandr_upright`'s 16. CLOPS starts from `wandr_short`, as its shipped prior
+did, and gets the same fine-tune (`clops`: rollouts of up to 60 frames, 8 minutes measured alone), then its own
+free-running terms (`clops_upright`: upright 1.0, pace 0.1 and turn 0.1 over 150-frame free runs of 1-s actions,
+`train_clops`; 23 minutes beside another training): on the tilt-fixed data `clops` alone let ClopsNav's 15-s
+forward walk sink (head over the last second 1.12 m, bodies falling); after `clops_upright` 1.48 m (lowest 1.09;
+without the turn term 1.41 m, and its small turning actions were slow: module doc of `train_clops`).
+`clops_upright` keeps the shipped prior's action deltas (`--actions-from shipped`): ClopsNav's policies act by
+action index, and the shipped ones were fine-tuned with them (`motion-envs train dqn --init`). It is the shipped
+CLOPS prior.
 
-The shipped WANDR prior is these five stages on the data after cleanup turned back the Daz files' pelvis
-tilt (`motion_envs.data.cleanup`, step 3; the first four rerun as `runs/priors_tilt`, `wandr_upright` fine-tuned
-from its `wandr_paced`): pace 0.33 m left after 6 s (`bench wandr-pace`; `wandr_paced` 0.31, the data 0.30); the
-8-s sampler (3,750 rollouts) SR 8.6% / FS 17.3% (`wandr_paced` 10.2% / 16.0%, the prior before the tilt fix
-6.2% / 21.3%), the paced sampler 62.0% (68.3%, 84.5%); head over the last second of a 15-s walk 1.48 m (1.44). CLOPS's shipped prior is `clops_upright` on the same data; GAMMA's were trained on the data before that
-step (each manifest's `data_hash` names its cache).
+The shipped WANDR prior is these five stages on the data after cleanup turned back the Daz files' pelvis tilt
+(`motion_envs.data.cleanup`, step 3; the first four rerun as `runs/priors_tilt`, `wandr_upright` fine-tuned from
+its `wandr_paced`): pace 0.33 m left after 6 s (`bench wandr-pace`; `wandr_paced` 0.31, the data 0.30); the 8-s
+sampler (3,750 rollouts) SR 8.6% / FS 17.3% (`wandr_paced` 10.2% / 16.0%, the prior before the tilt fix 6.2% /
+21.3%), the paced sampler 62.0% (68.3%, 84.5%); head over the last second of a 15-s walk 1.48 m (1.44). CLOPS's
+shipped prior is `clops_upright` on the same data; GAMMA's were trained on the data before that step (each
+manifest's `data_hash` names its cache).
 """
 
 from __future__ import annotations

@@ -15,10 +15,14 @@ Parameter convention (documented once here, used everywhere):
 Returned rotations are world rotations of each joint frame, identity at rest.
 
 How it is fast: joints are composed one depth level at a time (SMPL-X orders
-joints by depth, so each level is a contiguous slice), as transposed
-rotations Rᵀ. Every joint position and every skinned vertex is then linear
-in the stacked Rᵀ rows plus the pelvis position, so each is one GEMM with a
-fixed matrix: positions with the bone-offset chains, vertices with blend
+joints by depth, so each level is a contiguous slice), in a planes layout:
+rotations as (3, 3, joints, bodies), every 3 x 3 product written out as three
+accumulated outer products over long contiguous runs (a (..., 3, 3) batch of
+matmuls spends its time in per-matrix kernels and layout copies: for 8,192
+bodies on one core `from_matrices` took 16 ms that way and takes 6 now). Every
+joint position and every skinned vertex is then linear in the rotations'
+columns plus the pelvis position (`BodyPose.frame_rows`), so each is one GEMM
+with a fixed matrix: positions with the bone-offset chains, vertices with blend
 weights times rest offsets folded through those chains.
 """
 
@@ -31,7 +35,7 @@ import torch
 from torch import nn
 
 from motion_envs.body.frames import MANNEQUIN_TO_WORLD
-from motion_envs.body.rotations import rodrigues, rotation_matrix
+from motion_envs.body.rotations import gram_schmidt_entries, rodrigues_entries, rotation_matrix
 from motion_envs.body.skeleton import NUM_BODY_POSE_JOINTS, NUM_JOINTS, PARENTS, rest_body
 
 FRAME_ROWS = NUM_JOINTS * 3 + 1
@@ -53,12 +57,10 @@ class BodyPose(NamedTuple):
     frame_rows: torch.Tensor
 
 
-def _signed_gather(matrices: torch.Tensor, entries: torch.Tensor, signs: torch.Tensor) -> torch.Tensor:
-    """(..., 3, 3) -> (..., 3, 3) whose flat entry k is signs[k] · matrices' flat entry entries[k]. Gathered from a
-    (rows, 9) view: index_select over the last dimension of a 3-D tensor is 6x slower (3.9 against 0.6 ms for
-    8,192 × 21 rotations on one thread)."""
-    flat = matrices.reshape(-1, 9).index_select(1, entries)
-    return (flat * signs.to(flat.dtype)).reshape(matrices.shape)
+def _rotations_of_rows(rows: torch.Tensor, batch: torch.Size) -> torch.Tensor:
+    """(..., 22, 3, 3) world rotations as a view of `BodyPose.frame_rows` (67, B * 3) (not contiguous)."""
+    size = rows.shape[1] // 3
+    return rows[:-1].view(NUM_JOINTS, 3, size, 3).permute(2, 0, 3, 1).reshape(*batch, NUM_JOINTS, 3, 3)  # [n, j, a, b]
 
 
 def _depths(parents: tuple[int, ...]) -> list[int]:
@@ -114,18 +116,18 @@ class BodyModel(nn.Module):
         axes = np.asarray(MANNEQUIN_TO_WORLD)
         self._axis_permutation = [int(i) for i in np.abs(axes).argmax(axis=1)]
         self._axis_signs = [float(axes[i, j]) for i, j in enumerate(self._axis_permutation)]
-        # (A R Aᵀ)ᵀ[i, j] = s_i s_j R[p(j), p(i)] for the signed permutation A[i, p(i)] = s_i: one gather of the
-        # 9 entries instead of two broadcast matmuls (5.4 -> 1.5 ms for 172,032 rotations, 2 cores); back,
+        # (A R Aᵀ)[i, j] = s_i s_j R[p(i), p(j)] for the signed permutation A[i, p(i)] = s_i: picked and negated
+        # entries instead of two broadcast matmuls (5.4 -> 1.5 ms for 172,032 rotations, 2 cores); back,
         # (Aᵀ L A)[i, j] = s_q(i) s_q(j) L[q(i), q(j)] with q = p⁻¹
         permutation, signs = self._axis_permutation, self._axis_signs
         inverse = [permutation.index(axis) for axis in range(3)]
-        conjugate_entries = [3 * permutation[j] + permutation[i] for i in range(3) for j in range(3)]
-        conjugate_signs = [signs[i] * signs[j] for i in range(3) for j in range(3)]
+        conjugate_entries = [3 * permutation[i] + permutation[j] for i in range(3) for j in range(3)]
+        conjugate_signs = [[signs[i] * signs[j]] for i in range(3) for j in range(3)]  # (9, 1): per entry
         back_entries = [3 * inverse[i] + inverse[j] for i in range(3) for j in range(3)]
         back_signs = [signs[inverse[i]] * signs[inverse[j]] for i in range(3) for j in range(3)]
         for name, values in (("conjugate_entries", conjugate_entries), ("conjugate_signs", conjugate_signs)):
             self.register_buffer(name, torch.tensor(values), persistent=False)
-        self._back_entries, self._back_signs = back_entries, back_signs
+        self._conjugate_entries, self._back_entries, self._back_signs = conjugate_entries, back_entries, back_signs
 
     @property
     def num_vertices(self) -> int:
@@ -160,8 +162,8 @@ class BodyModel(nn.Module):
                 f"{(*batch, NUM_BODY_POSE_JOINTS, 6)}, got {tuple(body_pose.shape)}"
             )
         size = int(np.prod(batch)) if batch else 1
-        root = self._root_transposed(global_orient.reshape(size, global_orient.shape[-1]))
-        local = self._local_transposed(body_pose.reshape(size, NUM_BODY_POSE_JOINTS, body_pose.shape[-1]))
+        root = rotation_matrix(global_orient.reshape(size, global_orient.shape[-1]))
+        local = self._local_planes(body_pose.reshape(size, NUM_BODY_POSE_JOINTS, body_pose.shape[-1]))
         return self._compose(transl, root, local, batch)
 
     def from_matrices(self, transl: torch.Tensor, orient: torch.Tensor, pose: torch.Tensor) -> BodyPose:
@@ -172,16 +174,27 @@ class BodyModel(nn.Module):
             raise ValueError(f"need orient {(*batch, 3, 3)} and pose {(*batch, NUM_BODY_POSE_JOINTS, 3, 3)}, "
                              f"got {tuple(orient.shape)} and {tuple(pose.shape)}")  # fmt: skip
         size = int(np.prod(batch)) if batch else 1
-        local = self._world_axes_transposed(pose.reshape(size, NUM_BODY_POSE_JOINTS, 3, 3))
-        return self._compose(transl, orient.reshape(size, 3, 3).transpose(-1, -2), local, batch)
+        entries = pose.reshape(size, NUM_BODY_POSE_JOINTS, 9).permute(2, 1, 0).index_select(0, self.conjugate_entries)
+        local = (entries * self.conjugate_signs.to(entries.dtype)[..., None]).view(3, 3, NUM_BODY_POSE_JOINTS, size)
+        return self._compose(transl, orient.reshape(size, 3, 3), local, batch)
 
     def _compose(self, transl: torch.Tensor, root: torch.Tensor, local: torch.Tensor, batch: torch.Size) -> BodyPose:
-        """Forward kinematics from transposed world-axis rotations: root (B, 3, 3), local (B, 21, 3, 3)."""
-        levels = [root[:, None]]
+        """Forward kinematics: root (B, 3, 3) world pelvis rotations, local (3, 3, 21, B) the other joints' local
+        rotations in world axes (A R Aᵀ), planes layout ([a, b, joint, body] = R[a, b])."""
+        size = root.shape[0]
+        levels = [root.permute(1, 2, 0).unsqueeze(2)]  # (3, 3, 1, B)
         for start, stop, slots in self._levels:
-            parents = levels[-1][:, slots] if isinstance(slots, slice) else levels[-1].index_select(1, getattr(self, slots))
-            levels.append(local[:, start - 1 : stop - 1] @ parents)  # (R_p L)ᵀ = Lᵀ R_pᵀ
-        return self._posed(transl, torch.cat(levels, dim=1), batch)
+            parents = levels[-1][:, :, slots] if isinstance(slots, slice) else levels[-1].index_select(2, getattr(self, slots))
+            child = local[:, :, start - 1 : stop - 1]
+            world = parents[:, 0:1] * child[0:1]  # R_p L as three outer products of R_p's columns and L's rows
+            world.addcmul_(parents[:, 1:2], child[1:2]).addcmul_(parents[:, 2:3], child[2:3])
+            levels.append(world)
+        world = torch.cat(levels, dim=2)  # (3, 3, 22, B)
+        rows = world.new_empty(FRAME_ROWS, size, 3)
+        rows[:-1].view(NUM_JOINTS, 3, size, 3).copy_(world.permute(2, 1, 3, 0))  # [j, b, n, a] = R_j[a, b]
+        rows[-1].copy_(transl.reshape(size, 3))
+        rows = rows.view(FRAME_ROWS, size * 3)
+        return BodyPose(joints=self._joints_of_rows(rows, batch), rotations=_rotations_of_rows(rows, batch), frame_rows=rows)
 
     def with_world_rotations(self, pose: BodyPose, transl: torch.Tensor, joint_ids: torch.Tensor,
                              rotations: torch.Tensor) -> BodyPose:  # fmt: skip
@@ -201,17 +214,7 @@ class BodyModel(nn.Module):
         by_joint[joint_ids] = rotations.reshape(3, 3, size, len(joint_ids)).permute(3, 1, 2, 0)
         rows[-1] = transl.reshape(size * 3)
         batch = pose.joints.shape[:-2]
-        world = by_joint.permute(2, 0, 3, 1).reshape(*batch, NUM_JOINTS, 3, 3)  # a view: [n, j, a, b]
-        return BodyPose(joints=self._joints_of_rows(rows, batch), rotations=world, frame_rows=rows)
-
-    def _posed(self, transl: torch.Tensor, transposed: torch.Tensor, batch: torch.Size) -> BodyPose:
-        """BodyPose from transposed world rotations (B, 22, 3, 3): [n, j, b, a] = R_j[a, b]."""
-        size = transposed.shape[0]
-        rows = torch.cat(  # one pass: rearrange the rotations and append the pelvis
-            [transposed.reshape(size, FRAME_ROWS - 1, 3).permute(1, 0, 2), transl.reshape(1, size, 3)], dim=0
-        ).reshape(FRAME_ROWS, size * 3)
-        rotations = transposed.transpose(-1, -2).reshape(*batch, NUM_JOINTS, 3, 3)
-        return BodyPose(joints=self._joints_of_rows(rows, batch), rotations=rotations, frame_rows=rows)
+        return BodyPose(joints=self._joints_of_rows(rows, batch), rotations=_rotations_of_rows(rows, batch), frame_rows=rows)
 
     def _joints_of_rows(self, rows: torch.Tensor, batch: torch.Size) -> torch.Tensor:
         """(..., 22, 3) joint positions from `BodyPose.frame_rows` (67, B * 3): one matmul."""
@@ -219,33 +222,23 @@ class BodyModel(nn.Module):
         joints = (self.chain_rows.to(rows.dtype) @ rows).reshape(NUM_JOINTS, size, 3).transpose(0, 1)
         return joints.reshape(*batch, NUM_JOINTS, 3)
 
-    def _root_transposed(self, global_orient: torch.Tensor) -> torch.Tensor:
-        """(B, 3|6) -> (B, 3, 3) transposed pelvis rotation."""
-        if global_orient.shape[-1] == 3:
-            x, y, z = (-global_orient).movedim(-1, 0)  # R(-a) = R(a)ᵀ
-            return rodrigues(x, y, z)
-        return rotation_matrix(global_orient).transpose(-1, -2)
-
-    def _local_transposed(self, body_pose: torch.Tensor) -> torch.Tensor:
-        """(B, 21, 3|6) SMPL-X local rotations -> (B, 21, 3, 3) transposed, in world axes.
-
-        Conjugating by the axes map rotates the rotation axis; the map is a
-        signed permutation, so that is picking and negating planes.
-        """
+    def _local_planes(self, body_pose: torch.Tensor) -> torch.Tensor:
+        """(B, 21, 3|6) SMPL-X local rotations -> (3, 3, 21, B) in world axes, A R Aᵀ (A = `axes_to_world`), planes
+        layout. The components are made contiguous planes (joint-major) first. Axis-angle: conjugating by the
+        axes map rotates the rotation axis, a signed permutation of its components; 6-D: the matrix entries
+        picked and negated (`__init__`)."""
+        planes = body_pose.permute(2, 1, 0).contiguous()  # (3 | 6, 21, B)
         if body_pose.shape[-1] == 3:
-            planes = body_pose.movedim(-1, 0)
-            x, y, z = (-sign * planes[axis] for axis, sign in zip(self._axis_permutation, self._axis_signs))
-            return rodrigues(x, y, z)
-        return self._world_axes_transposed(rotation_matrix(body_pose))
-
-    def _world_axes_transposed(self, local: torch.Tensor) -> torch.Tensor:
-        """(..., 3, 3) SMPL-X local rotations R -> (A R Aᵀ)ᵀ, A = `axes_to_world` (one gather, see `__init__`)."""
-        return _signed_gather(local, self.conjugate_entries, self.conjugate_signs)
+            x, y, z = (sign * planes[axis] for axis, sign in zip(self._axis_permutation, self._axis_signs))
+            return torch.stack(rodrigues_entries(x, y, z)).view(3, 3, *planes.shape[1:])
+        entries = gram_schmidt_entries(*planes)
+        picked = torch.stack([entries[entry] for entry in self._conjugate_entries])
+        return (picked * self.conjugate_signs.to(picked.dtype)[..., None]).view(3, 3, *planes.shape[1:])
 
     def smplx_local(self, local_world: torch.Tensor) -> torch.Tensor:
         """(3, 3, ...) local rotations in world axes (parentᵀ @ child of world rotations) in the planes layout
         (components first, `leg_fit`'s) -> (..., 3, 3) in SMPL-X's own joint axes, Aᵀ L A (`body_pose`'s
-        convention): the signed permutation of `_world_axes_transposed` the other way, as picked planes stacked
+        convention): the signed permutation of `_local_planes` the other way, as picked planes stacked
         once into the matrices' layout."""
         entries = [local_world[entry // 3, entry % 3] for entry in self._back_entries]
         signed = [plane if sign > 0 else -plane for plane, sign in zip(entries, self._back_signs)]

@@ -10,6 +10,7 @@ another env fails with a sentence instead of a shape error inside torch.
 
 from __future__ import annotations
 
+import io
 import json
 import zipfile
 from dataclasses import asdict, dataclass, field
@@ -99,6 +100,32 @@ def read_policy_file(path: str | Path) -> PolicyFile:
     trained_for = TrainedFor(**stored) if isinstance(stored, dict) else _from_manifest(path)
     return PolicyFile(path, kind, data["observation_space"], data["action_space"], trained_for,
                       data.get("kl_prior_coef"), data.get("prior_mean"))  # fmt: skip
+
+
+def without_env_options(path: str | Path, names: list[str]) -> bytes:
+    """A policy file's bytes with `names` removed from its saved `trained_for` env options (the other entries as
+    they are): for a policy trained with an env option that stops applying once it ships, e.g. `weights=` naming a
+    prior in a run folder that ships with it as the env's default.
+
+    Raises:
+        PolicyFileError: the file carries no `trained_for`, or one without some of `names`.
+    """
+    path = Path(path)
+    read_policy_file(path)  # a saved policy, or a clear error
+    buffer = io.BytesIO()
+    with zipfile.ZipFile(path) as source, zipfile.ZipFile(buffer, "w", zipfile.ZIP_DEFLATED) as target:
+        for item in source.infolist():
+            contents = source.read(item.filename)
+            if item.filename == "data":
+                data = json.loads(contents)
+                options = (data.get("trained_for") or {}).get("env_kwargs")
+                missing = [name for name in names if options is None or name not in options]
+                if missing:
+                    raise PolicyFileError(f"{path} was not trained with the env option(s) {missing} (it saved: {options})")
+                data["trained_for"]["env_kwargs"] = {key: value for key, value in options.items() if key not in names}
+                contents = json.dumps(data, indent=4).encode()
+            target.writestr(item, contents)
+    return buffer.getvalue()
 
 
 def _from_manifest(path: Path) -> TrainedFor | None:

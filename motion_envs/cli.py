@@ -176,6 +176,37 @@ def _play(args: argparse.Namespace) -> int:
     return 0
 
 
+def _ship(args: argparse.Namespace) -> int:
+    from motion_envs.priors.training import ship_trained
+
+    contents, notes = None, {}
+    if args.drop_env_option:
+        from agents.policy_files import without_env_options
+
+        contents = without_env_options(args.file, args.drop_env_option)
+        notes["promoted"] = (f"trained as {args.file} with env option(s) {', '.join(args.drop_env_option)} as its manifest "
+                             "record's config says; shipped without them in the file's trained_for")  # fmt: skip
+    elif args.file.suffix == ".zip":
+        _refuse_run_folder_options(args.file)
+    if args.note:
+        notes["note"] = args.note
+    ship_trained(args.file, name=args.name, contents=contents, notes=notes)
+    return 0
+
+
+def _refuse_run_folder_options(policy: Path) -> None:
+    """Refuse to ship a policy whose saved env options name weights outside the package (a prior from a run folder):
+    users would not have them."""
+    from agents.policy_files import read_policy_file
+
+    trained_for = read_policy_file(policy).trained_for
+    options = {key: value for key, value in (trained_for.env_kwargs if trained_for else {}).items()
+               if key in ("weights", "weights_dir") and value is not None}  # fmt: skip
+    if options:
+        raise ValueError(f"{policy} was trained with env option(s) {options}, which users of the package would not have: "
+                         "ship that prior first, then ship the policy with --drop-env-option " + " --drop-env-option ".join(options))  # fmt: skip
+
+
 def _view(args: argparse.Namespace) -> int:
     from motion_envs.play import LiveEpisodes
     from motion_envs.rollout import Rollout
@@ -533,7 +564,7 @@ def _subsets(args: argparse.Namespace) -> tuple[str, ...]:
 def parser() -> argparse.ArgumentParser:
     root = argparse.ArgumentParser(prog="motion-envs", description="Motion-prior Gymnasium environments.",
                                    epilog="--debug (anywhere): show the traceback of an error instead of one line")  # fmt: skip
-    commands = root.add_subparsers(dest="command", required=True, metavar="{data,train,bench,play,populate,view}")
+    commands = root.add_subparsers(dest="command", required=True, metavar="{data,train,bench,play,populate,view,ship}")
 
     data = commands.add_parser("data", help="build the motion cache from a mocap folder").add_subparsers(
         dest="action", required=True
@@ -773,6 +804,16 @@ def parser() -> argparse.ArgumentParser:
     crowd.add_argument("--video", type=Path, default=None, help="write an mp4 of the crowd")
     crowd.add_argument("--save-rollout", type=Path, default=None, help="write every frame to an .npz for `motion-envs view`")
     crowd.set_defaults(run=_populate)
+
+    ship = commands.add_parser("ship", help="copy a run's finished weights or policy into the package, with its manifest "
+                                            "record and the history of what it replaces")  # fmt: skip
+    ship.add_argument("file", type=Path, help="weights or a policy a train command wrote (its run folder's manifest has its record)")
+    ship.add_argument("--as", dest="name", default=None, metavar="NAME",
+                      help="the shipped file's name (default: the file's own), e.g. ppo_wandrreach_alpha1_default.zip")
+    ship.add_argument("--drop-env-option", action="append", default=[], metavar="KEY",
+                      help="policies: remove this saved env option (e.g. weights, for a prior shipped as the default) (repeatable)")
+    ship.add_argument("--note", default=None, help="a note for the manifest record (what was measured, why it ships)")
+    ship.set_defaults(run=_ship)
 
     view = commands.add_parser("view", help="browser viewer (viser): replay a rollout file or run a policy live")
     view.add_argument("rollout", nargs="?", type=Path, default=None, help="an .npz from `motion-envs play --save-rollout`")

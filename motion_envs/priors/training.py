@@ -186,22 +186,60 @@ def ship(model: nn.Module, weights: Path, entry: dict[str, Any]) -> dict[str, An
     return entry
 
 
-def ship_trained(weights: Path, folder: Path | None = None) -> Path:
+def ship_trained(weights: Path, folder: Path | None = None, name: str | None = None, contents: bytes | None = None,
+                 notes: dict[str, str] | None = None) -> Path:  # fmt: skip
     """Copy finished weights of a run folder (and their record in the manifest beside them) into the package's
-    priors/weights/ (or `folder`, with its own manifest), naming what they replace; returns the shipped path."""
+    priors/weights/ (or `folder`, with its own manifest) as `name` (default: the file's own), naming what they
+    replace; returns the shipped path.
+
+    The record keeps the history of the one it replaces (`with_history`). `contents`: the bytes to ship instead of
+    the file's (a policy whose saved env options were edited, `agents.policy_files.without_env_options`); `notes`:
+    entries added to the record (e.g. "note", "promoted")."""
     weights = Path(weights)
     manifest_path = weights.parent / "manifest.json"
     record = json.loads(manifest_path.read_text()).get(weights.name) if manifest_path.exists() else None
     if record is None:
         raise FileNotFoundError(f"{weights} has no record in {manifest_path}; ship only what a train command wrote")
-    shipped = Path(folder or WEIGHTS_DIR) / weights.name
+    shipped = Path(folder or WEIGHTS_DIR) / (name or weights.name)
+    if shipped.resolve() == weights.resolve():
+        raise ValueError(f"{weights} is already the shipped file")
     shipped.parent.mkdir(parents=True, exist_ok=True)
+    shipped_manifest = shipped.parent / "manifest.json"
+    replaced = json.loads(shipped_manifest.read_text()).get(shipped.name) if shipped_manifest.exists() else None
     announce_replacement(shipped)
-    data = weights.read_bytes()
+    data = weights.read_bytes() if contents is None else contents
     atomic_write(shipped, lambda file: file.write(data))
-    record_in_manifest(shipped, record)
+    record_in_manifest(shipped, {**with_history(record, replaced, shipped), **(notes or {})})
     print(f"shipped {weights} as {shipped}", file=sys.stderr)
     return shipped
+
+
+def command_of(record: dict[str, Any]) -> str | None:
+    """The command that made a manifest record's weights (priors keep it at the top, policies in their config)."""
+    config = record.get("config")
+    return record.get("command") or (config.get("command") if isinstance(config, dict) else None)
+
+
+def with_history(record: dict[str, Any], replaced: dict[str, Any] | None, shipped: Path) -> dict[str, Any]:
+    """`record` of weights about to replace the shipped `replaced` at `shipped`, with the history a reader needs to
+    repeat them. A fine-tune of the shipped weights (its config's `init` is `shipped`) goes on from them:
+    `stages` is the replaced record's stages and its own last stage (command, steps, curve, machine), and
+    `repeat` chains the commands. Anything else starts afresh and names what it replaces (`replaces`)."""
+    if replaced is None:
+        return record
+    config = record.get("config") if isinstance(record.get("config"), dict) else {}
+    init = config.get("init")
+    if init and resolve_weights(init).resolve() == shipped.resolve():
+        stage = {"command": command_of(replaced), "timesteps": replaced.get("timesteps"), "shipped": replaced.get("shipped"),
+                 "curve": replaced.get("curve", []), "machine": replaced.get("machine")}  # fmt: skip
+        if replaced.get("curve"):
+            stage["last_window"] = replaced["curve"][-1]
+        repeat = f"{replaced.get('repeat') or command_of(replaced)} && {command_of(record)}"
+        return {**record, "stages": [*replaced.get("stages", []), stage], "repeat": repeat}
+    summary = {key: replaced[key] for key in ("timesteps", "shipped", "data_hash") if key in replaced}
+    if replaced.get("curve"):
+        summary["last_window"] = replaced["curve"][-1]
+    return {**record, "replaces": {"command": command_of(replaced), **summary}}
 
 
 def record_in_manifest(weights: Path, entry: dict[str, Any]) -> None:

@@ -93,3 +93,16 @@ def test_a_file_without_a_record_is_refused(package, tmp_path, capsys):
     stray.write_bytes(b"weights")
     assert main(["ship", str(stray)]) == 1
     assert "has no record" in capsys.readouterr().err and not (package / "stray.pt").exists()
+
+
+def test_train_ship_into_the_package_names_what_it_replaces(package):
+    """`train ... --ship` writes through `training.ship` (priors) and `ship_policy` (policies) straight into the
+    package: the record there keeps the history of the one it replaces, as `motion-envs ship` does."""
+    from torch import nn
+
+    weights = package / "tiny.pt"
+    training.ship(nn.Linear(2, 2), weights, {"kind": "tiny", "command": "train one"})
+    assert "replaces" not in json.loads((package / "manifest.json").read_text())["tiny.pt"]
+    training.ship(nn.Linear(2, 2), weights, {"kind": "tiny", "command": "train two"})
+    record = json.loads((package / "manifest.json").read_text())["tiny.pt"]
+    assert record["command"] == "train two" and record["replaces"]["command"] == "train one"

@@ -95,7 +95,7 @@ def weights_destination(name: str, run_dir: Path, weights: Path | None = None, s
 def announce_replacement(weights: Path) -> None:
     """Say on stderr which shipped weights (and the manifest's record of them) a write to `weights` replaces."""
     weights = Path(weights)
-    if not weights.exists() or weights.resolve().parent != WEIGHTS_DIR.resolve():
+    if not weights.exists() or not in_package(weights):
         return
     manifest_path = WEIGHTS_DIR / "manifest.json"
     record = json.loads(manifest_path.read_text()).get(weights.name, {}) if manifest_path.exists() else {}
@@ -181,7 +181,7 @@ def ship(model: nn.Module, weights: Path, entry: dict[str, Any]) -> dict[str, An
     entry = {**entry, "torch": str(torch.__version__), "machine": cpu_description()}
     announce_replacement(weights)
     save_checkpoint(weights, {**entry, "model": half})
-    record_in_manifest(weights, entry)
+    (record_shipped if in_package(weights) else record_in_manifest)(weights, entry)
     print(f"weights {weights} (manifest: {Path(weights).parent / 'manifest.json'})", file=sys.stderr)
     return entry
 
@@ -204,12 +204,10 @@ def ship_trained(weights: Path, folder: Path | None = None, name: str | None = N
     if shipped.resolve() == weights.resolve():
         raise ValueError(f"{weights} is already the shipped file")
     shipped.parent.mkdir(parents=True, exist_ok=True)
-    shipped_manifest = shipped.parent / "manifest.json"
-    replaced = json.loads(shipped_manifest.read_text()).get(shipped.name) if shipped_manifest.exists() else None
     announce_replacement(shipped)
     data = weights.read_bytes() if contents is None else contents
     atomic_write(shipped, lambda file: file.write(data))
-    record_in_manifest(shipped, {**with_history(record, replaced, shipped), **(notes or {})})
+    record_shipped(shipped, {**record, **(notes or {})})
     print(f"shipped {weights} as {shipped}", file=sys.stderr)
     return shipped
 
@@ -240,6 +238,19 @@ def with_history(record: dict[str, Any], replaced: dict[str, Any] | None, shippe
     if replaced.get("curve"):
         summary["last_window"] = replaced["curve"][-1]
     return {**record, "replaces": {"command": command_of(replaced), **summary}}
+
+
+def record_shipped(weights: Path, entry: dict[str, Any]) -> None:
+    """`record_in_manifest` for weights that replace others in the same place: the entry keeps the history of the
+    record it replaces (`with_history`)."""
+    manifest_path = Path(weights).parent / "manifest.json"
+    replaced = json.loads(manifest_path.read_text()).get(Path(weights).name) if manifest_path.exists() else None
+    record_in_manifest(weights, with_history(entry, replaced, Path(weights)))
+
+
+def in_package(weights: Path) -> bool:
+    """Whether `weights` is in the package's weights folder (what `--ship` writes)."""
+    return Path(weights).resolve().parent == WEIGHTS_DIR.resolve()
 
 
 def record_in_manifest(weights: Path, entry: dict[str, Any]) -> None:

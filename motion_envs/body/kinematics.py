@@ -35,7 +35,7 @@ import torch
 from torch import nn
 
 from motion_envs.body.frames import MANNEQUIN_TO_WORLD
-from motion_envs.body.rotations import gram_schmidt_entries, rodrigues_entries, rotation_matrix
+from motion_envs.body.rotations import gram_schmidt_entries, planes_matmul, rodrigues_entries, rotation_matrix
 from motion_envs.body.skeleton import NUM_BODY_POSE_JOINTS, NUM_JOINTS, PARENTS, rest_body
 
 FRAME_ROWS = NUM_JOINTS * 3 + 1
@@ -185,10 +185,7 @@ class BodyModel(nn.Module):
         levels = [root.permute(1, 2, 0).unsqueeze(2)]  # (3, 3, 1, B)
         for start, stop, slots in self._levels:
             parents = levels[-1][:, :, slots] if isinstance(slots, slice) else levels[-1].index_select(2, getattr(self, slots))
-            child = local[:, :, start - 1 : stop - 1]
-            world = parents[:, 0:1] * child[0:1]  # R_p L as three outer products of R_p's columns and L's rows
-            world.addcmul_(parents[:, 1:2], child[1:2]).addcmul_(parents[:, 2:3], child[2:3])
-            levels.append(world)
+            levels.append(planes_matmul(parents, local[:, :, start - 1 : stop - 1]))  # R_parent L
         world = torch.cat(levels, dim=2)  # (3, 3, 22, B)
         rows = world.new_empty(FRAME_ROWS, size, 3)
         rows[:-1].view(NUM_JOINTS, 3, size, 3).copy_(world.permute(2, 1, 3, 0))  # [j, b, n, a] = R_j[a, b]

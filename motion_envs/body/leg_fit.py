@@ -23,8 +23,8 @@ All in world axes on `BodyPose.rotations`; the result is SMPL-X local rotations 
 convention, `motion_envs.body.kinematics`; `BodyModel.from_matrices` poses them).
 
 The geometry works in a planes layout: components first, vectors (3, ...) and matrices (3, 3, ...), every
-3 x 3 product written out over the batch (`_matmul`). A (..., 3, 3) batch of 3 x 3 matmuls spends its time in
-per-matrix kernels and layout copies; planes are long contiguous runs (at 1,024 bodies x 8 frames x 2 legs the fit
+3 x 3 product written out over the batch (`rotations.planes_matmul`). A (..., 3, 3) batch of 3 x 3 matmuls
+spends its time in per-matrix kernels and layout copies; planes are long contiguous runs (at 1,024 bodies x 8 frames x 2 legs the fit
 went from 43-48 to 27-30 ms on one AVX2 core, and the foot rule from 12% of a GAMMA step to 4%). The fitted rotations
 go back into the body's rotation rows directly (`BodyModel.with_world_rotations`) and to SMPL-X axes from the planes
 (`BodyModel.smplx_local`), with no (..., 3, 3) layout in between: on an AMX Xeon, the same 16,384 legs, 31.5 -> 23.7 ms
@@ -39,6 +39,7 @@ import torch
 
 from motion_envs.body.kinematics import BodyModel, BodyPose
 from motion_envs.body.markers import MARKER_NAMES, marker_ids
+from motion_envs.body.rotations import planes_matmul
 from motion_envs.body.skeleton import joint_index
 
 FOOT_FIT_MARKERS: dict[str, tuple[str, ...]] = {
@@ -79,18 +80,8 @@ def leg_joints(values: torch.Tensor, trailing: int) -> torch.Tensor:
     return block.unflatten(axis, (4, 3)).narrow(axis + 1, 0, 2)
 
 
-def _matmul(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
-    """(3, 3, ...) @ (3, 3, ...) in the planes layout: 27 elementwise products over the batch (six times
-    faster than a batched matmul's 3 x 3 kernels at 16,384 matrices, and no layout copies), as three outer
-    products of a column and a row accumulated in place (a (3, 3, 3, ...) product summed over its middle axis
-    was 3x slower: 117 against 38 us at 16,384 matrices, 2 cores)."""
-    product = a[:, :1] * b[None, 0]
-    product.addcmul_(a[:, 1:2], b[None, 1])
-    return product.addcmul_(a[:, 2:], b[None, 2])
-
-
 def _matvec(a: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
-    """(3, 3, ...) @ (3, ...) in the planes layout, accumulated as `_matmul`'s."""
+    """(3, 3, ...) @ (3, ...) in the planes layout, accumulated as `planes_matmul`'s."""
     product = a[:, 0] * v[:1]
     product.addcmul_(a[:, 1], v[1:2])
     return product.addcmul_(a[:, 2], v[2:])
@@ -144,7 +135,7 @@ def rigid_foot_motion(current: torch.Tensor, target: torch.Tensor) -> tuple[torc
     `target`'s: the frames of three markers matched, the four rigid markers' centroids. Exact for a rigid
     target; for predicted markers (a few mm from rigid) close to a least-squares fit at a tenth of its cost
     (Kabsch on 16,384 feet: 38 ms on one core)."""
-    turn = _matmul(foot_frame(target), _transpose(foot_frame(current)))
+    turn = planes_matmul(foot_frame(target), _transpose(foot_frame(current)))
     centre = current[..., :TOE_TIP].mean(-1)
     return turn, target[..., :TOE_TIP].mean(-1) - _matvec(turn, centre)
 
@@ -228,17 +219,17 @@ def fit_legs(body: BodyModel, posed: BodyPose, transl: torch.Tensor, current: to
     turn, shift = rigid_foot_motion(current, target_markers)  # (3, 3, ..., 2), (3, ..., 2)
     target = _matvec(turn, ankle) + shift
     thigh, shin = two_bone(hip, knee, ankle, target, hip_old[:, 1])  # the rest body faces +y; knees bend forwards
-    hip_world = _matmul(thigh, hip_old)
-    knee_world = _matmul(_matmul(shin, thigh), knee_old)
-    ankle_world = _matmul(turn, ankle_old)
+    hip_world = planes_matmul(thigh, hip_old)
+    knee_world = planes_matmul(planes_matmul(shin, thigh), knee_old)
+    ankle_world = planes_matmul(turn, ankle_old)
     toe_joint = _matvec(turn, toes) + shift
     toe_tip = _matvec(turn, current[..., TOE_TIP]) + shift
     toe_turn = smallest_rotation(toe_tip - toe_joint, target_markers[..., TOE_TIP] - toe_joint)
-    toe_world = _matmul(_matmul(toe_turn, turn), toe_old)
+    toe_world = planes_matmul(planes_matmul(toe_turn, turn), toe_old)
     pelvis = posed.rotations[..., :1, :, :].movedim((-2, -1), (0, 1))  # (3, 3, ..., 1): both hips' parent
     fitted = (hip_world, knee_world, ankle_world, toe_world)  # (3, 3, ..., 2) each
     parents = (pelvis, *fitted[:-1])
-    local_world = [_matmul(_transpose(parent), child) for parent, child in zip(parents, fitted)]
+    local_world = [planes_matmul(_transpose(parent), child) for parent, child in zip(parents, fitted)]
     leg_pose = body.smplx_local(torch.stack(local_world, dim=-1).flatten(-2))  # (..., 8, 3, 3), `LEG_JOINTS` order
     legs = torch.stack(fitted, dim=-1).flatten(-2)  # (3, 3, ..., 8): the left leg's four, then the right's
     return FittedLegs(leg_pose, body.with_world_rotations(posed, transl, LEG_JOINTS_TENSOR.to(transl.device), legs))

@@ -25,6 +25,7 @@ import torch
 from agents.controllers import PolicyLatent
 from benchmarks.machine import machine_line
 from motion_envs.atomic import atomic_write
+from motion_envs.body.foot_lock import MAX_OFFSET
 from motion_envs.body.markers import foot_vertex_ids, sole_vertex_ids
 from motion_envs.data.primitives import GAMMA_FPS
 from motion_envs.envs.gamma_reach import SOLE_MARKERS, GammaReachConfig, GammaReachCore
@@ -147,7 +148,7 @@ def main(bodies: int = 128, primitives: int = 30, seed: int = 0, shown: int = 3,
         f"without it ({seconds[True] / seconds[False]:.2f}x; best of 3, alternated, this process, {torch.get_num_threads()} "
         f"threads, {cores[True].generator.precision}). The "
         "predicted markers slide the same with and without it (it changes only the bodies); the rest of the gap "
-        "to the data is the predictor's own: its feet drift, and a foot is held at most 5 cm behind them.",
+        f"to the data is the predictor's own: its feet drift, and a foot is held at most {MAX_OFFSET * 100:.0f} cm behind them.",
         "",
         machine_line(),
         f"Command: `motion-envs bench gamma-feet`; {time.perf_counter() - began:.0f} s in all.",

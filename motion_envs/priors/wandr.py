@@ -34,7 +34,7 @@ from motion_envs.priors.wandr_features import (
 
 
 WANDR_MAX_OFFSET = 0.15
-"""The farthest (m) the foot rule holds a WANDR foot from the prior's (GAMMA's: `foot_lock.MAX_OFFSET`, 5 cm).
+"""The farthest (m) the foot rule holds a WANDR foot from the prior's (GAMMA's: `foot_lock.MAX_OFFSET`, 12 cm).
 The shown legs are not fed back, and WANDR's bent legs rarely run out of reach: under the PPO policy's mean latent
 (750 grid rollouts) caps of 5 / 8 / 12 / 15 / 20 cm gave WANDR's FS 34.4 / 29.0 / 25.5 / 24.2 / 23.2% (no rule 55.6%)
 with 0.08 / 0.19 / 0.26 / - / 0.45% of leg solves out of reach."""

@@ -184,8 +184,8 @@ def _ship(args: argparse.Namespace) -> int:
         from agents.policy_files import without_env_options
 
         contents = without_env_options(args.file, args.drop_env_option)
-        notes["promoted"] = (f"trained as {args.file} with env option(s) {', '.join(args.drop_env_option)} as its manifest "
-                             "record's config says; shipped without them in the file's trained_for")  # fmt: skip
+        notes["promoted"] = (f"trained as {args.file} with the env option(s) {', '.join(args.drop_env_option)} (its record's "
+                             "config); shipped without them in the file's trained_for")  # fmt: skip
     elif args.file.suffix == ".zip":
         _refuse_run_folder_options(args.file)
     if args.note:

@@ -37,13 +37,7 @@ from agents.vec_env import NativeVecEnv  # noqa: E402
 from motion_envs.atomic import atomic_write  # noqa: E402
 from motion_envs.data.goal_windows import GoalWindows  # noqa: E402
 from motion_envs.precision import cpu_description  # noqa: E402
-from motion_envs.priors.training import (  # noqa: E402
-    announce_replacement,
-    in_package,
-    record_in_manifest,
-    record_shipped,
-    weights_destination,
-)
+from motion_envs.priors.training import announce_replacement, record_in_manifest, weights_destination  # noqa: E402
 
 
 DEFAULT_REWARDS = {"motion_envs/GammaReach-v0": "paper", "motion_envs/GammaWander-v0": "paper", "motion_envs/WandrReach-v0": "default"}
@@ -312,7 +306,7 @@ def ship_policy(model: Any, config: Any, curve: list[dict], kind: str, best: boo
              "timesteps": int(model.num_timesteps), "curve": curve, "torch": str(torch.__version__),
              "machine": cpu_description(),
              "shipped": f"best window: {top['timesteps']} steps" if shipped_best else "last", **extra}  # fmt: skip
-    (record_shipped if in_package(weights) else record_in_manifest)(weights, entry)
+    record_in_manifest(weights, entry)
     plot_curve(curve, config.run_dir / "curve.png", steps_label)
     return entry
 

@@ -181,7 +181,7 @@ def ship(model: nn.Module, weights: Path, entry: dict[str, Any]) -> dict[str, An
     entry = {**entry, "torch": str(torch.__version__), "machine": cpu_description()}
     announce_replacement(weights)
     save_checkpoint(weights, {**entry, "model": half})
-    (record_shipped if in_package(weights) else record_in_manifest)(weights, entry)
+    record_in_manifest(weights, entry)
     print(f"weights {weights} (manifest: {Path(weights).parent / 'manifest.json'})", file=sys.stderr)
     return entry
 
@@ -207,7 +207,7 @@ def ship_trained(weights: Path, folder: Path | None = None, name: str | None = N
     announce_replacement(shipped)
     data = weights.read_bytes() if contents is None else contents
     atomic_write(shipped, lambda file: file.write(data))
-    record_shipped(shipped, {**record, **(notes or {})})
+    record_in_manifest(shipped, {**record, **(notes or {})}, history=True)
     print(f"shipped {weights} as {shipped}", file=sys.stderr)
     return shipped
 
@@ -240,24 +240,20 @@ def with_history(record: dict[str, Any], replaced: dict[str, Any] | None, shippe
     return {**record, "replaces": {"command": command_of(replaced), **summary}}
 
 
-def record_shipped(weights: Path, entry: dict[str, Any]) -> None:
-    """`record_in_manifest` for weights that replace others in the same place: the entry keeps the history of the
-    record it replaces (`with_history`)."""
-    manifest_path = Path(weights).parent / "manifest.json"
-    replaced = json.loads(manifest_path.read_text()).get(Path(weights).name) if manifest_path.exists() else None
-    record_in_manifest(weights, with_history(entry, replaced, Path(weights)))
-
-
 def in_package(weights: Path) -> bool:
     """Whether `weights` is in the package's weights folder (what `--ship` writes)."""
     return Path(weights).resolve().parent == WEIGHTS_DIR.resolve()
 
 
-def record_in_manifest(weights: Path, entry: dict[str, Any]) -> None:
-    """Set `entry` as the record of `weights` in the `manifest.json` beside it (written atomically)."""
+def record_in_manifest(weights: Path, entry: dict[str, Any], history: bool | None = None) -> None:
+    """Set `entry` as the record of `weights` in the `manifest.json` beside it (written atomically). With `history`
+    (default: for weights in the package, which replace shipped ones) the entry keeps the history of the record it
+    replaces (`with_history`)."""
+    weights = Path(weights)
     manifest_path = weights.parent / "manifest.json"
     manifest = json.loads(manifest_path.read_text()) if manifest_path.exists() else {}
-    manifest[weights.name] = entry
+    keep_history = in_package(weights) if history is None else history
+    manifest[weights.name] = with_history(entry, manifest.get(weights.name), weights) if keep_history else entry
     text = json.dumps(manifest, indent=2) + "\n"
     atomic_write(manifest_path, lambda file: file.write(text.encode()))
 

@@ -19,7 +19,7 @@ joints by depth, so each level is a contiguous slice), in a planes layout:
 rotations as (3, 3, joints, bodies), every 3 x 3 product written out as three
 accumulated outer products over long contiguous runs (a (..., 3, 3) batch of
 matmuls spends its time in per-matrix kernels and layout copies: for 8,192
-bodies on one core `from_matrices` took 16 ms that way and takes 6 now). Every
+bodies on one core `from_matrices` took 16 ms that way and takes 7.7 now). Every
 joint position and every skinned vertex is then linear in the rotations'
 columns plus the pelvis position (`BodyPose.frame_rows`), so each is one GEMM
 with a fixed matrix: positions with the bone-offset chains, vertices with blend
@@ -127,7 +127,7 @@ class BodyModel(nn.Module):
         back_signs = [signs[inverse[i]] * signs[inverse[j]] for i in range(3) for j in range(3)]
         for name, values in (("conjugate_entries", conjugate_entries), ("conjugate_signs", conjugate_signs)):
             self.register_buffer(name, torch.tensor(values), persistent=False)
-        self._conjugate_entries, self._back_entries, self._back_signs = conjugate_entries, back_entries, back_signs
+        self._back_entries, self._back_signs = back_entries, back_signs
 
     @property
     def num_vertices(self) -> int:
@@ -174,8 +174,7 @@ class BodyModel(nn.Module):
             raise ValueError(f"need orient {(*batch, 3, 3)} and pose {(*batch, NUM_BODY_POSE_JOINTS, 3, 3)}, "
                              f"got {tuple(orient.shape)} and {tuple(pose.shape)}")  # fmt: skip
         size = int(np.prod(batch)) if batch else 1
-        entries = pose.reshape(size, NUM_BODY_POSE_JOINTS, 9).permute(2, 1, 0).index_select(0, self.conjugate_entries)
-        local = (entries * self.conjugate_signs.to(entries.dtype)[..., None]).view(3, 3, NUM_BODY_POSE_JOINTS, size)
+        local = self._world_axes(pose.reshape(size, NUM_BODY_POSE_JOINTS, 9).permute(2, 1, 0))
         return self._compose(transl, orient.reshape(size, 3, 3), local, batch)
 
     def _compose(self, transl: torch.Tensor, root: torch.Tensor, local: torch.Tensor, batch: torch.Size) -> BodyPose:
@@ -222,15 +221,18 @@ class BodyModel(nn.Module):
     def _local_planes(self, body_pose: torch.Tensor) -> torch.Tensor:
         """(B, 21, 3|6) SMPL-X local rotations -> (3, 3, 21, B) in world axes, A R Aᵀ (A = `axes_to_world`), planes
         layout. The components are made contiguous planes (joint-major) first. Axis-angle: conjugating by the
-        axes map rotates the rotation axis, a signed permutation of its components; 6-D: the matrix entries
-        picked and negated (`__init__`)."""
+        axes map rotates the rotation axis, a signed permutation of its components; 6-D: `_world_axes`."""
         planes = body_pose.permute(2, 1, 0).contiguous()  # (3 | 6, 21, B)
         if body_pose.shape[-1] == 3:
             x, y, z = (sign * planes[axis] for axis, sign in zip(self._axis_permutation, self._axis_signs))
             return torch.stack(rodrigues_entries(x, y, z)).view(3, 3, *planes.shape[1:])
-        entries = gram_schmidt_entries(*planes)
-        picked = torch.stack([entries[entry] for entry in self._conjugate_entries])
-        return (picked * self.conjugate_signs.to(picked.dtype)[..., None]).view(3, 3, *planes.shape[1:])
+        return self._world_axes(torch.stack(gram_schmidt_entries(*planes)))
+
+    def _world_axes(self, entries: torch.Tensor) -> torch.Tensor:
+        """(9, 21, B) SMPL-X local rotations' entries, row-major -> (3, 3, 21, B) A R Aᵀ in world axes: the entries
+        picked and negated (`__init__`)."""
+        picked = entries.index_select(0, self.conjugate_entries)
+        return (picked * self.conjugate_signs.to(picked.dtype)[..., None]).view(3, 3, *entries.shape[1:])
 
     def smplx_local(self, local_world: torch.Tensor) -> torch.Tensor:
         """(3, 3, ...) local rotations in world axes (parentᵀ @ child of world rotations) in the planes layout

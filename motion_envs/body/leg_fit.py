@@ -22,13 +22,13 @@ predicted markers put it:
 All in world axes on `BodyPose.rotations`; the result is SMPL-X local rotations as matrices (`body_pose`
 convention, `motion_envs.body.kinematics`; `BodyModel.from_matrices` poses them).
 
-The geometry works in a planes layout: components first, vectors (3, ...) and matrices (3, 3, ...), every
-3 x 3 product written out over the batch (`rotations.planes_matmul`). A (..., 3, 3) batch of 3 x 3 matmuls
-spends its time in per-matrix kernels and layout copies; planes are long contiguous runs (at 1,024 bodies x 8 frames x 2 legs the fit
-went from 43-48 to 27-30 ms on one AVX2 core, and the foot rule from 12% of a GAMMA step to 4%). The fitted rotations
-go back into the body's rotation rows directly (`BodyModel.with_world_rotations`) and to SMPL-X axes from the planes
-(`BodyModel.smplx_local`), with no (..., 3, 3) layout in between: on an AMX Xeon, the same 16,384 legs, 31.5 -> 23.7 ms
-on one core, 19.9 -> 15.3 ms on two.
+The geometry works in a planes layout: components first, vectors (3, ...) and matrices (3, 3, ...), every 3 x 3
+product written out over the batch (`rotations.planes_matmul`). A (..., 3, 3) batch of 3 x 3 matmuls spends its time
+in per-matrix kernels and layout copies; planes are long contiguous runs (at 1,024 bodies x 8 frames x 2 legs the
+fit went from 43-48 to 27-30 ms on one AVX2 core, and the foot rule from 12% of a GAMMA step to 4%). The fitted
+rotations go back into the body's rotation rows directly (`BodyModel.with_world_rotations`) and to SMPL-X axes from
+the planes (`BodyModel.smplx_local`), with no (..., 3, 3) layout in between: on an AMX Xeon, the same 16,384 legs,
+31.5 -> 23.7 ms on one core, 19.9 -> 15.3 ms on two.
 """
 
 from __future__ import annotations

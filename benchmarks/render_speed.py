@@ -21,6 +21,7 @@ import torch
 
 from benchmarks.machine import machine_line
 from benchmarks.sections import replace_section
+from benchmarks.throughput import command_line
 from motion_envs.data.primitives import GAMMA_FPS
 from motion_envs.data.start_poses import load_start_poses
 from motion_envs.render.camera import follow_camera
@@ -67,7 +68,8 @@ def egocentric_fps(renderer: EgocentricRenderer, bodies: int, repeats: int = 10)
     return bodies / median_seconds(lambda _: renderer.render(eye, rotation, goal), repeats)
 
 
-def main() -> int:
+def main(output: str = "throughput") -> int:
+    """Writes the two sections into `benchmarks/results/<output>.md` (other sections are kept)."""
     began = time.perf_counter()
     starts = load_start_poses(GAMMA_FPS)
     scene = make_scene(*SCENE)
@@ -91,7 +93,7 @@ def main() -> int:
              "analytic ground, goal sphere and trail; median of 40 frames with a moving camera. Target (issue 7): ≥ 20 frames/s.",
              "", "| where | bodies per image | frames/s |", "|---|---|---|"]  # fmt: skip
     lines += [f"| {where} | {count} | {fps:.1f} |" for where, count, fps in rows]
-    lines += ["", machine_line(), "Command: `motion-envs bench render`.", ""]
+    lines += ["", machine_line(), f"Command: `{command_line('render', output)}`.", ""]
     third = "\n".join(lines)
 
     ego_rows = []
@@ -103,9 +105,9 @@ def main() -> int:
              "the goal sphere analytic. Median of 10 batches. Target (issue 7): ≥ 1,000 frames/s at 64 × 64.", "",
              "| resolution | bodies per call | body-frames/s | rays/s |", "|---|---|---|---|"]  # fmt: skip
     lines += [f"| {size} × {size} | {count} | {fps:,.0f} | {fps * size * size / 1e6:.1f} M |" for size, count, fps in ego_rows]
-    lines += ["", machine_line(), f"Command: `motion-envs bench render`; {time.perf_counter() - began:.0f} s for both sections.", ""]
+    lines += ["", machine_line(), f"Command: `{command_line('render', output)}`; {time.perf_counter() - began:.0f} s for both sections.", ""]
     ego = "\n".join(lines)
     print(third + "\n" + ego)
-    replace_section(RESULTS / "throughput.md", third)
-    replace_section(RESULTS / "throughput.md", ego)
+    replace_section(RESULTS / f"{output}.md", third)
+    replace_section(RESULTS / f"{output}.md", ego)
     return 0

@@ -42,15 +42,28 @@ TARGETS = {"float32": 5_000, "bfloat16": 10_000}
 """Body-primitives/s at 1,024 bodies on 2 cores (issue "Speed and portability"); bf16 only where it is native."""
 
 
+def command_line(bench: str, output: str) -> str:
+    """The `motion-envs bench` command that wrote a throughput section to `output` (a results file stem)."""
+    return f"motion-envs bench {bench}" + ("" if output == "throughput" else f" --output {output}")
+
+
 def best_seconds(run: Callable[[], object], repeats: int) -> float:
     """Fastest of `repeats` timed calls after one warm-up call."""
-    run()
-    times = []
-    for _ in range(repeats):
-        tick = time.perf_counter()
+    return interleaved_best_seconds([run], repeats)[0]
+
+
+def interleaved_best_seconds(runs: list[Callable[[], object]], repeats: int) -> list[float]:
+    """Fastest of `repeats` timed calls of each of `runs`, called in turn (a, b, a, b, ...) after one warm-up call
+    each, so that a shared machine's drift affects all of them alike."""
+    for run in runs:
         run()
-        times.append(time.perf_counter() - tick)
-    return min(times)
+    times = [[] for _ in runs]
+    for _ in range(repeats):
+        for run, seen in zip(runs, times):
+            tick = time.perf_counter()
+            run()
+            seen.append(time.perf_counter() - tick)
+    return [min(seen) for seen in times]
 
 
 @torch.no_grad()
@@ -96,7 +109,8 @@ def step_flops(core: GammaReachCore, state: GammaReachState) -> float:
 
 
 def main(batches: tuple[int, ...] = (64, 128, 256, 512, 1024, 4096), bf16_batches: tuple[int, ...] = (64, 256, 1024),
-         env_batches: tuple[int, ...] = (64, 256, 1024)) -> int:  # fmt: skip
+         env_batches: tuple[int, ...] = (64, 256, 1024), output: str = "throughput") -> int:  # fmt: skip
+    """Writes the "GAMMA rollout" and "Other envs' stepping" sections of `benchmarks/results/<output>.md`."""
     began = time.perf_counter()
     generator = GammaGenerator.load()
     core = GammaReachCore(GammaReachConfig(), generator)
@@ -113,13 +127,15 @@ def main(batches: tuple[int, ...] = (64, 128, 256, 512, 1024, 4096), bf16_batche
             print(f"{precision} {count}: {seconds:.3f} s per primitive, {count / seconds:,.0f} body-primitives/s")
     faults = page_faults_per_step(core, state, z)  # the last timed: 1,024 bodies (bf16 where listed)
     rule_free = GammaReachCore(dataclasses.replace(core.config, lock_feet=False), generator)
-    for precision in ("float32", "bfloat16"):  # the foot rule's cost at 1,024 bodies
+    rule_costs = {}
+    for precision in ("float32", "bfloat16"):  # the foot rule's cost at 1,024 bodies, with and without it in turn
         generator.set_precision(precision)
-        state = walking_state(rule_free, 1024)
+        states = walking_state(core, 1024), walking_state(rule_free, 1024)
         z = torch.randn(1024, generator.latent_size, generator=torch.Generator().manual_seed(0))
-        seconds = best_seconds(lambda: rule_free.step(state, z), 5)
+        with_rule, seconds = interleaved_best_seconds([lambda: core.step(states[0], z), lambda: rule_free.step(states[1], z)], 5)
+        rule_costs[precision] = with_rule / seconds - 1
         rows.append((f"{precision}, no foot rule", 1024, seconds, 1024 / seconds))
-        print(f"{precision} 1024 without the foot rule: {seconds:.3f} s per primitive")
+        print(f"{precision} 1024 without the foot rule: {seconds:.3f} s per primitive (with it, in turn: {with_rule:.3f} s)")
     generator.set_precision("float32")
     env_rows = []
     for count in env_batches:
@@ -145,7 +161,9 @@ def main(batches: tuple[int, ...] = (64, 128, 256, 512, 1024, 4096), bf16_batche
         SECTION, "",
         "One primitive (10 frames at 40 fps, 8 new) for every body: both marker predictors, body regression and skinning of the 8 new "
         "frames, blending, the envs' floor and foot rules (`ground_feet`, `lock_feet`: the defaults), markers and the reward "
-        "(`GammaReachCore.step`), best of 5; the last rows without the foot rule. The paper's Table S3: "
+        "(`GammaReachCore.step`), best of 5; the last rows without the foot rule, each timed in turn with the rule's "
+        f"step so that the machine's drift cancels: the rule costs {rule_costs['float32']:+.0%} of an fp32 step and "
+        f"{rule_costs['bfloat16']:+.0%} of a bf16 step at 1,024 bodies. The paper's Table S3: "
         f"{PAPER_SECONDS_1024} s per primitive for 1,024 bodies on a Quadro RTX 6000 GPU ≈ "
         f"{1024 / PAPER_SECONDS_1024:,.0f} body-primitives/s. One body-primitive costs {per_body / 1e6:.1f} MFLOP "
         f"(torch's FLOP counter). This machine's matmul (1024², same run, through oneDNN as the priors' layers): "
@@ -176,17 +194,17 @@ def main(batches: tuple[int, ...] = (64, 128, 256, 512, 1024, 4096), bf16_batche
               "raw core step on the same bodies:", "",
               "| bodies | raw step (s) | SB3 env.step (s) | overhead |", "|---|---|---|---|"]  # fmt: skip
     lines += [f"| {count:,} | {raw:.3f} | {wrapped:.3f} | {wrapped / raw - 1:+.0%} |" for count, raw, wrapped in env_rows]
-    lines += ["", machine_line(), f"Command: `motion-envs bench speed`; {time.perf_counter() - began:.0f} s in all.", ""]
+    lines += ["", machine_line(), f"Command: `{command_line('speed', output)}`; {time.perf_counter() - began:.0f} s in all.", ""]
     section = "\n".join(lines)
     print(section)
-    replace_section(RESULTS / "throughput.md", section)
-    other = other_envs_section()
+    replace_section(RESULTS / f"{output}.md", section)
+    other = other_envs_section(command=command_line("speed", output))
     print(other)
-    replace_section(RESULTS / "throughput.md", other)
+    replace_section(RESULTS / f"{output}.md", other)
     return 0
 
 
-def other_envs_section(bodies: int = 64, actions: int = 3) -> str:
+def other_envs_section(bodies: int = 64, actions: int = 3, command: str = "motion-envs bench speed") -> str:
     """WANDR's decode at 1,024 bodies and ClopsNav's step at `bodies` (random actions), measured on the same machine
     line as the GAMMA rollout (these priors run in fp32 on every CPU: they have no bf16 mode)."""
     from benchmarks.clops_matrix import stepping_rate
@@ -203,5 +221,5 @@ def other_envs_section(bodies: int = 64, actions: int = 3) -> str:
         f"| WandrReach-v0, env core step | 1,024 | {wandr['env']:,.0f} body-frames/s | |",
         f"| ClopsNav-v0 (open, 64 × 64 views), random actions | {bodies} | {per_action:,.0f} actions/s ({per_frame:,.0f} "
         "body-frames/s: decode, collisions, views) | |",
-        "", machine_line(), "Command: `motion-envs bench speed`.", "",
+        "", machine_line(), f"Command: `{command}`.", "",
     ])  # fmt: skip

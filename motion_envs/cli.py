@@ -10,6 +10,9 @@ from pathlib import Path
 from motion_envs.allocator import keep_freed_memory
 from motion_envs.data.paths import SHIPPED_SUBSETS
 
+THROUGHPUT_OUTPUT_HELP = ("results file stem under benchmarks/results/ (default throughput, the main table; e.g. "
+                          "throughput_avx2 for a CPU of another class)")  # fmt: skip
+
 
 def _data_build(args: argparse.Namespace) -> int:
     from motion_envs.data.build import build
@@ -121,7 +124,7 @@ def _bench_gamma_turns(args: argparse.Namespace) -> int:
 def _bench_speed(args: argparse.Namespace) -> int:
     from benchmarks.throughput import main as throughput
 
-    return throughput()
+    return throughput(output=args.output)
 
 
 def _bench_rllib(args: argparse.Namespace) -> int:
@@ -145,7 +148,7 @@ def _bench_gpu(args: argparse.Namespace) -> int:
 def _bench_render(args: argparse.Namespace) -> int:
     from benchmarks.render_speed import main as render_speed
 
-    return render_speed()
+    return render_speed(output=args.output)
 
 
 def _bench_gamma_feet(args: argparse.Namespace) -> int:
@@ -744,9 +747,9 @@ def parser() -> argparse.ArgumentParser:
                              help="priors to measure (e.g. motion_envs/priors/weights/clean; default: the shipped ones)")
     bench_floor.add_argument("--output", default=None, help="result table name (default floor)")
     bench_floor.set_defaults(run=_bench_floor)
-    bench.add_parser("speed", help="GAMMA rollout body-primitives/s by batch, fp32 and bf16 (throughput.md)").set_defaults(
-        run=_bench_speed
-    )
+    speed = bench.add_parser("speed", help="GAMMA rollout body-primitives/s by batch, fp32 and bf16 (throughput.md)")
+    speed.add_argument("--output", default="throughput", help=THROUGHPUT_OUTPUT_HELP)
+    speed.set_defaults(run=_bench_speed)
     bench_rllib = bench.add_parser("rllib", help="PPO steps/s on GammaReach: RLlib env runners vs the SB3 path (rllib.md)")
     bench_rllib.add_argument("--bodies", type=int, default=256, help="bodies per update (default 256)")
     bench_rllib.add_argument("--curve-from", type=Path, default=None,
@@ -758,9 +761,9 @@ def parser() -> argparse.ArgumentParser:
     bench.add_parser("gpu", help="CUDA: CPU and GPU agree on the same latents; GPU throughput (skips without CUDA)").set_defaults(
         run=_bench_gpu
     )
-    bench.add_parser("render", help="third-person and egocentric rendering frames/s (benchmarks/results/throughput.md)").set_defaults(
-        run=_bench_render
-    )
+    render = bench.add_parser("render", help="third-person and egocentric rendering frames/s (benchmarks/results/throughput.md)")
+    render.add_argument("--output", default="throughput", help=THROUGHPUT_OUTPUT_HELP)
+    render.set_defaults(run=_bench_render)
     realism = bench.add_parser("gamma-realism", help="random-latent GAMMA motion vs the data: contact score, FS")
     _add_data_args(realism, list(SHIPPED_SUBSETS))
     realism.add_argument("--rollouts", type=int, default=10, help="rollouts per shipped start pose")

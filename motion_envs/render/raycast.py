@@ -57,11 +57,14 @@ class RayCaster:
 
         With `parallel`, above `PARALLEL_RAYS` rays the batch is split over torch's thread count (embree frees
         the GIL); callers already running on `thread_pool` pass False."""
+        origins = np.ascontiguousarray(origins, dtype=np.float32)  # once: the threads' parts are views of it
+        directions = np.ascontiguousarray(directions, dtype=np.float32)
         threads = min(torch.get_num_threads(), len(origins) // PARALLEL_RAYS + 1) if parallel else 1
         if threads <= 1:
             return self._cast(origins, directions)
-        chunks = np.array_split(np.arange(len(origins)), threads)
-        results = list(thread_pool(threads).map(lambda rows: self._cast(origins[rows], directions[rows]), chunks))
+        bounds = np.linspace(0, len(origins), threads + 1).astype(int)
+        parts = [slice(start, stop) for start, stop in zip(bounds[:-1], bounds[1:])]
+        results = list(thread_pool(threads).map(lambda part: self._cast(origins[part], directions[part]), parts))
         return np.concatenate([r[0] for r in results]), np.concatenate([r[1] for r in results])
 
     def _cast(self, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -75,7 +78,8 @@ class RayCaster:
         result = self._scene.run(np.ascontiguousarray(origins, dtype=np.float32),
                                  np.ascontiguousarray(directions, dtype=np.float32), output=1)  # fmt: skip
         triangle = result["primID"].astype(np.int64)
-        distance = np.where(triangle >= 0, result["tfar"], np.inf).astype(np.float32)
+        distance = result["tfar"]  # float32, written by this call alone
+        distance[triangle < 0] = np.inf
         return triangle, distance
 
 

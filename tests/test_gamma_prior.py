@@ -29,6 +29,8 @@ def test_canonical_frame_round_trip_and_axes(generator):
     frame = canonical_frame(joints)
     points = torch.randn(5, 7, 3, generator=generator)
     assert torch.allclose(to_world(to_canonical(points, frame), frame), points, atol=1e-5)
+    # the turn about z written out per axis is the frame's rotation matrix
+    assert torch.allclose(to_world(points, frame), points @ frame.rotation.mT + frame.origin[:, None], atol=1e-5)
     canonical = to_canonical(joints, frame)
     assert torch.allclose(canonical[:, 0], torch.zeros(5, 3), atol=1e-5)  # pelvis at the origin
     across = canonical[:, 2] - canonical[:, 1]  # right hip - left hip lies along +x

@@ -189,22 +189,22 @@ def _ship(args: argparse.Namespace) -> int:
         contents = without_env_options(args.file, args.drop_env_option)
         notes["promoted"] = (f"trained as {args.file} with the env option(s) {', '.join(args.drop_env_option)} (its record's "
                              "config); shipped without them in the file's trained_for")  # fmt: skip
-    elif args.file.suffix == ".zip":
-        _refuse_run_folder_options(args.file)
+    if args.file.suffix == ".zip":
+        _refuse_run_folder_options(args.file, dropped=args.drop_env_option or [])
     if args.note:
         notes["note"] = args.note
     ship_trained(args.file, name=args.name, contents=contents, notes=notes)
     return 0
 
 
-def _refuse_run_folder_options(policy: Path) -> None:
-    """Refuse to ship a policy whose saved env options name weights outside the package (a prior from a run folder):
-    users would not have them."""
+def _refuse_run_folder_options(policy: Path, dropped: list[str]) -> None:
+    """Refuse to ship a policy whose saved env options, but for those `dropped`, name weights outside the package (a
+    prior from a run folder): users would not have them."""
     from agents.policy_files import read_policy_file
 
     trained_for = read_policy_file(policy).trained_for
     options = {key: value for key, value in (trained_for.env_kwargs if trained_for else {}).items()
-               if key in ("weights", "weights_dir") and value is not None}  # fmt: skip
+               if key in ("weights", "weights_dir") and value is not None and key not in dropped}  # fmt: skip
     if options:
         raise ValueError(f"{policy} was trained with env option(s) {options}, which users of the package would not have: "
                          "ship that prior first, then ship the policy with --drop-env-option " + " --drop-env-option ".join(options))  # fmt: skip

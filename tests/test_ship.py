@@ -86,6 +86,10 @@ def test_a_policy_trained_on_a_run_folder_prior_ships_only_without_that_option(p
     assert "weights" in json.loads((package / "manifest.json").read_text())[POLICY]["promoted"]
     assert main(["ship", str(run), "--as", POLICY, "--drop-env-option", "scene"]) == 1
     assert "not trained with the env option(s) ['scene']" in capsys.readouterr().err
+    both = _run(tmp_path / "runs", "ppo_on_two.zip", record, {**options, "weights_dir": "runs/prior"})
+    assert main(["ship", str(both), "--as", POLICY, "--drop-env-option", "weights"]) == 1  # weights_dir still named
+    assert "--drop-env-option weights_dir" in capsys.readouterr().err
+    assert read_policy_file(package / POLICY).trained_for.env_kwargs == {"reward": "default"}  # the one shipped above
 
 
 def test_a_file_without_a_record_is_refused(package, tmp_path, capsys):

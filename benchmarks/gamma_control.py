@@ -272,6 +272,8 @@ class GammaRow:
     """The prior's folder (None: the shipped one)."""
     heading_calibration: bool = False
     """The prior's heading calibration on (`GammaReachConfig.heading_calibration`): as the policy was trained."""
+    mirror_right_goals: bool = False
+    """Bodies whose goal starts on their right live in their mirror image (`GammaReachConfig.mirror_right_goals`)."""
 
     def __post_init__(self) -> None:
         if self.controller not in CONTROLLERS:
@@ -279,9 +281,11 @@ class GammaRow:
 
 
 @functools.lru_cache(maxsize=4)
-def cached_core(precision: str, goal_cvae: bool, weights_dir: str | None = None, heading_calibration: bool = False) -> GammaReachCore:
+def cached_core(precision: str, goal_cvae: bool, weights_dir: str | None = None, heading_calibration: bool = False,
+                mirror_right_goals: bool = False) -> GammaReachCore:  # fmt: skip
     """One env core per process and setting (cores are stateless between rollouts; loading the prior is not free)."""
-    core = GammaReachCore(GammaReachConfig(precision=precision, weights_dir=weights_dir, heading_calibration=heading_calibration))
+    core = GammaReachCore(GammaReachConfig(precision=precision, weights_dir=weights_dir, heading_calibration=heading_calibration,
+                                           mirror_right_goals=mirror_right_goals))  # fmt: skip
     if not goal_cvae:
         return core
     return GammaReachCore(GammaReachConfig(weights_dir=weights_dir), goal_cvae_generator(g_cvae_weights(weights_dir), core.generator))
@@ -295,7 +299,7 @@ def g_cvae_weights(weights_dir: str | None) -> Path:
 def run_shard(row: GammaRow, first: int, last: int, seed: int) -> dict:
     """Pairs [first, last) of the row (`Recorder.row`'s figures, plus the task's seconds)."""
     began = time.perf_counter()
-    core = cached_core(row.precision, row.controller == "g-cvae", row.weights_dir, row.heading_calibration)
+    core = cached_core(row.precision, row.controller == "g-cvae", row.weights_dir, row.heading_calibration, row.mirror_right_goals)
     start = fixed_pairs(core, range(first, last), seed)
     shard_seed = group_seed(seed, first)
     proposal = PolicyLatent(row.policy, seed=shard_seed) if row.controller == "policy" else RandomLatent(shard_seed)
@@ -334,11 +338,13 @@ def table(rows: dict[str, dict], paper: dict[str, tuple] | None = None) -> list[
 
 def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False, bf16: bool = False,
          precision: str = "auto", output: str | None = None, ray_address: str | None = None,
-         policies: list[Path] | None = None, weights_dir: Path | None = None) -> int:  # fmt: skip
+         policies: list[Path] | None = None, weights_dir: Path | None = None, mirror_right_goals: bool = False) -> int:  # fmt: skip
     """`precision`: the prior's networks for the main table; `output`: the results' file stem (default
     gamma_control[_quick]); `ray_address`: fan the pair groups out over Ray ("local" or a cluster's address);
     `policies`: GammaReach policy files to evaluate in place of the shipped ones (e.g. one trained on RLlib);
-    `weights_dir`: a folder holding a GAMMA prior and its policies, used for both (default: the shipped ones)."""
+    `weights_dir`: a folder holding a GAMMA prior and its policies, used for both (default: the shipped ones);
+    `mirror_right_goals`: every row but the g-CVAE's (whose goal features are not mirrored) with bodies whose goal
+    starts on their right living in their mirror image (`GammaReachConfig.mirror_right_goals`)."""
     if quick:
         pairs, clones = 20, 8
     began, requested = time.perf_counter(), precision
@@ -346,10 +352,10 @@ def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False,
     core = cached_core(precision, False, folder)
     start = fixed_pairs(core, pairs, seed)
     precision = core.generator.precision  # "auto" resolved here: every task, on whatever CPU, runs the same networks
-    row = functools.partial(GammaRow, precision=precision, weights_dir=folder)
+    row = functools.partial(GammaRow, precision=precision, weights_dir=folder, mirror_right_goals=mirror_right_goals)
     runs: dict[str, GammaRow] = {"random z": row("random", clones=clones)}
     if g_cvae_weights(folder).exists():
-        runs["g-CVAE"] = row("g-cvae", clones=clones)
+        runs["g-CVAE"] = row("g-cvae", clones=clones, mirror_right_goals=False)
     shipped = sorted(Path(weights_dir or WEIGHTS_DIR).glob("ppo_gammareach_*.zip"))
     evaluated = ({policy_label(path): path for path in shipped} if policies is None
                  else {f"{policy_label(path)} ({path})": path for path in policies})  # fmt: skip
@@ -364,7 +370,7 @@ def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False,
     searcher = searchers.get("policy(10)")
     runs["random z & top4"] = row("random", keep=4)
     rows = run_rows(runs, pairs, seed, ray_address)
-    stem = output or "gamma_control" + ("_quick" if quick else "")
+    stem = output or "gamma_control" + ("_mirror" if mirror_right_goals else "") + ("_quick" if quick else "")
     lines = [
         f"# GAMMA goal reaching ({'quick: ' if quick else ''}{pairs} body-goal pairs × {clones} clones, up to 60 primitives)",
         "",
@@ -378,6 +384,9 @@ def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False,
         "Bodies as the env makes them: the floor and foot rules on (`ground_feet`, `lock_feet`; `gamma_feet.md` compares). "
         f"Pairs run in groups of {PAIRS_PER_TASK} (`benchmarks.fanout`), "
         + ("in this process" if ray_address is None else f"as Ray tasks ({ray_address})") + "; seconds: a row's groups, summed.",
+        *(["", "Bodies whose goal starts on their right live the episode in their mirror image "
+            "(`GammaReachConfig.mirror_right_goals`, ours): every row but the g-CVAE's (its goal features are not "
+            "mirrored)."] if mirror_right_goals else []),
         "", *table(rows, PAPER_ROWS), "",
         f"Per body: each policy row again with its {clones} clones of every pair on their own (none stops another), "
         "success by the goal's direction from the start body's facing and by its distance (pairs per bin in brackets); "
@@ -403,6 +412,7 @@ def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False,
               f"{'' if requested == 'auto' else ' --precision ' + requested}{' --output ' + output if output else ''}"
               f"{'' if ray_address is None else ' --ray ' + ray_address}"
               f"{'' if weights_dir is None else ' --weights-dir ' + str(weights_dir)}"
+              f"{' --mirror-right-goals' if mirror_right_goals else ''}"
               f"{'' if not policies else ' --policies ' + ' '.join(str(path) for path in policies)}`; "
               f"{time.perf_counter() - began:.0f} s in all.", "", f"![paths]({stem}.png)", ""]  # fmt: skip
     text = "\n".join(lines)

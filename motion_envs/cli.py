@@ -54,7 +54,7 @@ def _bench_gamma(args: argparse.Namespace) -> int:
 
     return gamma_control(pairs=args.pairs, clones=args.clones, seed=args.seed, quick=args.quick, bf16=args.bf16,
                          precision=args.precision, output=args.output, ray_address=args.ray, policies=args.policies,
-                         weights_dir=args.weights_dir)  # fmt: skip
+                         weights_dir=args.weights_dir, mirror_right_goals=args.mirror_right_goals)  # fmt: skip
 
 
 def _bench_clops(args: argparse.Namespace) -> int:
@@ -691,6 +691,9 @@ def parser() -> argparse.ArgumentParser:
     bench_gamma.add_argument("--output", default=None, help="results file stem under benchmarks/results/ (default gamma_control[_quick])")
     bench_gamma.add_argument("--policies", type=Path, nargs="+", default=None,
                              help="policy .zip files to evaluate instead of the shipped ones (clone rows only, no search rows)")
+    bench_gamma.add_argument("--mirror-right-goals", action="store_true",
+                             help="bodies whose goal starts on their right live in their mirror image (GammaReach's "
+                                  "mirror_right_goals; default output gamma_control_mirror[_quick])")
     bench_gamma.add_argument("--weights-dir", type=Path, default=None,
                              help="a folder with a GAMMA prior and its ppo_gammareach_*.zip policies, used for both "
                                   "(e.g. motion_envs/priors/weights/clean; default: the shipped ones)")  # fmt: skip

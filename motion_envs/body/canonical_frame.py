@@ -71,6 +71,11 @@ def goal_observation(seed_markers: torch.Tensor, first_seed_joints: torch.Tensor
     the canonical frame of the first seed frame."""
     frame = canonical_frame(first_seed_joints)
     markers = to_canonical(seed_markers.flatten(1, 2), frame).unflatten(1, (2, -1))  # (N, 2, 67, 3)
-    towards = to_canonical(goal[:, None], frame)[:, None] - markers
+    return canonical_goal_observation(markers, to_canonical(goal[:, None], frame))
+
+
+def canonical_goal_observation(markers: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
+    """`goal_observation` of markers (N, 2, 67, 3) and goals (N, 1, 3) already in the canonical frame -> (N, 804)."""
+    towards = goal[:, None] - markers
     towards = towards / towards.norm(dim=-1, keepdim=True).clamp_min(1e-8)
     return torch.cat([markers, towards], dim=-1).flatten(1)

@@ -105,7 +105,14 @@ from motion_envs.envs.core import CoreVectorEnv, check_actions, config_from_kwar
 from motion_envs.envs.options import check_known, index, number, point
 from motion_envs.metrics import contact_score, loaded_slide, slowest_marker_speed
 from motion_envs.precision import PRECISIONS, resolve_precision
-from motion_envs.body.canonical_frame import PELVIS, goal_observation
+from motion_envs.body.canonical_frame import (
+    PELVIS,
+    canonical_frame,
+    canonical_goal_observation,
+    goal_observation,
+    to_canonical,
+)
+from motion_envs.body.mirror import mirror_points
 from motion_envs.body.markers import MARKER_NAMES
 from motion_envs.priors.gamma_generator import GammaGenerator, GammaSeed, Primitive
 from motion_envs.render.env_view import EnvView, RenderInputs
@@ -167,6 +174,15 @@ class GammaReachConfig:
     the shipped policies were trained without it (with it on, the alpha = 1 policy reaches 0.28 instead of 0.91 of
     the goals 12 m to its left within 15 s: `motion-envs bench gamma-turns`); policies trained with it record it in
     their env options."""
+    mirror_right_goals: bool = False
+    """Bodies whose goal lies on their right at the start (canonical x > 0) live the episode in their mirror image:
+    they see the mirror image's observation (`GammaGenerator.mirrored_seed_markers`, the goal reflected), and the
+    prior makes the mirror image's primitives, mirrored back (`GammaGenerator.step`'s `mirror`). Decided once per
+    episode: deciding per primitive made the alpha = 10 (cloned) policy, which approaches a goal holding it a
+    little to one side, switch back and forth (per body 0.82 -> 0.71, 100 pairs x 8 bodies). Ours, not GAMMA's: the trained prior turns left far more readily than right (`bench gamma-turns`),
+    so policies reach goals on the left (per body 0.99) and fail those on the right (0.64, `gamma_control_fp32.md`);
+    the prior trains on every clip and its mirror image, so the mirror image's motion is as much the prior's own.
+    Off by default: the shipped policies were trained without it (they need no retraining: they see left goals)."""
     stooping: float = 0.0
     """Per new frame and metre that the head is lower than `upright_head`, subtracted from the reward (ours, not
     GAMMA's; 0: off). GAMMA's reward has no posture term, and its policies walk hunched, the head hanging forward
@@ -201,13 +217,15 @@ class GammaReachConfig:
 @dataclasses.dataclass(frozen=True)
 class GammaReachState(BatchedState):
     """N bodies' simulation state. goal: (N, 3) on the ground. steps: (N,) primitives so far.
-    closest: (N,) closest pelvis-goal ground distance so far (m). goal_paid: (N,) r_goal paid so far."""
+    closest: (N,) closest pelvis-goal ground distance so far (m). goal_paid: (N,) r_goal paid so far.
+    mirrored: (N,) bool, bodies living their episode in their mirror image (`GammaReachConfig.mirror_right_goals`)."""
 
     seed: GammaSeed
     goal: torch.Tensor
     steps: torch.Tensor
     closest: torch.Tensor
     goal_paid: torch.Tensor
+    mirrored: torch.Tensor
 
 
 @dataclasses.dataclass(frozen=True)
@@ -270,7 +288,11 @@ class GammaReachCore:
         goal = torch.cat([goal_xy.to(torch.float32), torch.zeros(count, 1, device=self.device)], dim=1)
         distance = (goal_xy - transl[:, :2]).norm(dim=-1)
         steps = torch.zeros(count, dtype=torch.long, device=self.device)
-        return GammaReachState(seed, goal, steps, distance, torch.zeros(count, device=self.device))
+        mirrored = torch.zeros(count, dtype=torch.bool, device=self.device)
+        if self.config.mirror_right_goals:  # the goal on the body's right: canonical x > 0
+            first = seed.joints[:, -1]  # a one-frame seed: both slots hold its frame
+            mirrored = to_canonical(goal[:, None], canonical_frame(first))[:, 0, 0] > 0
+        return GammaReachState(seed, goal, steps, distance, torch.zeros(count, device=self.device), mirrored)
 
     def sample_initial_state(self, rngs: list[np.random.Generator], options: dict[str, Any] | None = None) -> GammaReachState:
         """One random start per generator (the single env has one; the vector env one per body).
@@ -309,10 +331,18 @@ class GammaReachCore:
         return RenderInputs(seed.transl[:, -1], seed.global_orient[:, -1], seed.body_pose[:, -1], seed.joints[:, -1, PELVIS], state.goal)
 
     def observe(self, state: GammaReachState) -> torch.Tensor:
-        """(N, 804): per seed frame, canonical markers and unit marker-to-goal vectors (Eq. 3)."""
+        """(N, 804): per seed frame, canonical markers and unit marker-to-goal vectors (Eq. 3); with
+        `mirror_right_goals`, the mirror image's for bodies whose goal is on their right."""
         seed = state.seed
         bodies = torch.arange(seed.num_bodies, device=self.device)
-        return goal_observation(seed.markers, seed.joints[bodies, 2 - seed.seed_frames], state.goal)
+        first = seed.joints[bodies, 2 - seed.seed_frames]
+        observation = goal_observation(seed.markers, first, state.goal)
+        if state.mirrored.any():
+            rows = torch.nonzero(state.mirrored).flatten()
+            frame = canonical_frame(first[rows])
+            goal = mirror_points(to_canonical(state.goal[rows, None], frame))
+            observation[rows] = canonical_goal_observation(self.generator.mirrored_seed_markers(seed.index(rows), frame), goal)
+        return observation
 
     def step(self, state: GammaReachState, z: torch.Tensor) -> tuple[GammaReachState, GammaStepResult]:
         """Generate one primitive per body from latents z (N, 128) and score it."""
@@ -321,7 +351,7 @@ class GammaReachCore:
         if config.latent_radius is not None:
             z = z * (config.latent_radius / z.norm(dim=-1, keepdim=True).clamp_min(config.latent_radius))
         primitive, next_seed = self.generator.step(state.seed, z, state.goal, ground_feet=config.ground_feet,
-                                                    lock_feet=config.lock_feet)
+                                                    lock_feet=config.lock_feet, mirror=state.mirrored)
         joints, goal = primitive.joints, state.goal
         pelvis_start, pelvis_end = joints[:, 0, PELVIS], joints[:, -1, PELVIS]
         distance = (pelvis_end[:, :2] - goal[:, :2]).norm(dim=-1)
@@ -355,7 +385,7 @@ class GammaReachCore:
                   + config.stooping * terms["stooping"] + config.skating * terms["skating"])  # fmt: skip
         result = GammaStepResult(reward, terms, distance, reached, terminated, truncated,
                                  contact_score(primitive.markers, GAMMA_FPS, forward_slowest), primitive)  # fmt: skip
-        return GammaReachState(next_seed, goal, steps, closest, paid), result
+        return GammaReachState(next_seed, goal, steps, closest, paid, state.mirrored), result
 
 
 def _step_info(result: GammaStepResult, state: GammaReachState, index: int) -> dict[str, Any]:

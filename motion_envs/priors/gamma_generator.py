@@ -58,6 +58,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import itertools
 from pathlib import Path
 
 import torch
@@ -67,6 +68,7 @@ from motion_envs.body import BodyModel
 from motion_envs.body.foot_lock import locked_feet
 from motion_envs.body.leg_fit import CONTACT_POINTS, LEG_POSE_ROWS, fit_legs, leg_fit_marker_slots
 from motion_envs.body.markers import marker_ids
+from motion_envs.body.mirror import mirror_body_pose, mirror_marker_offsets, mirror_points, mirror_rotations
 from motion_envs.body.soles import sole_hull_vertex_ids
 from motion_envs.body.rotations import matrix_to_sixd, rotation_matrix
 from motion_envs.data.primitives import GAMMA_FPS, PRIMITIVE_FRAMES
@@ -236,24 +238,47 @@ class GammaGenerator(torch.nn.Module):
         count = torch.ones(len(transl), dtype=torch.long, device=transl.device)
         return GammaSeed(count, twice(markers), twice(markers), twice(joints), twice(transl), twice(orient), twice(pose))
 
+    def mirrored_seed_markers(self, seed: GammaSeed, frame: CanonicalFrame) -> torch.Tensor:
+        """(N, 2, 67, 3): the seed's markers as its mirror image has them, in the canonical `frame` (batch (N,)) of
+        the first seed frame (whose mirror image has the same frame): the mirrored bodies' own markers (a body
+        mirrored pose by pose, as the training data's mirror images are) plus the seed markers' offsets from
+        their bodies' (the blend's), each carried to the mirror image's marker (`body.mirror`)."""
+        return self._mirrored_markers({name: getattr(seed, name) for name in SEED_FIELDS}, frame)
+
+    def _mirrored_markers(self, seed: dict[str, torch.Tensor], frame: CanonicalFrame) -> torch.Tensor:
+        """`mirrored_seed_markers` of seed fields (M, S, ...) -> (M, S, 67, 3)."""
+        frames = seed["transl"].shape[1]
+        canonical = {name: to_canonical(seed[name].flatten(1, 2), frame).unflatten(1, (frames, -1))
+                     for name in ("markers", "body_markers")}  # fmt: skip
+        transl = to_canonical(seed["transl"], frame)
+        orient = frame.rotation.mT[:, None] @ rotation_matrix(seed["global_orient"])
+        posed = self.body.from_matrices(mirror_points(transl), mirror_rotations(orient),
+                                        mirror_body_pose(rotation_matrix(seed["body_pose"])))  # fmt: skip
+        body_markers = self.body.skin_with_rows(posed, self.marker_rows)
+        return body_markers + mirror_marker_offsets(canonical["markers"] - canonical["body_markers"])
+
     @torch.no_grad()
     def step(self, seed: GammaSeed, z: torch.Tensor, goal: torch.Tensor | None = None,
-             ground_feet: bool = False, lock_feet: bool = False) -> tuple[Primitive, GammaSeed]:  # fmt: skip
+             ground_feet: bool = False, lock_feet: bool = False, mirror: torch.Tensor | None = None) -> tuple[Primitive, GammaSeed]:  # fmt: skip
         """Generate one primitive for every body. z: (N, latent). goal: (N, 3) world, needed (and only used)
         by a goal-conditioned predictor (the g-CVAE baseline). `ground_feet`: the floor rule (module doc, 6).
-        `lock_feet`: the foot rule, loaded feet held still (module doc, 5)."""
+        `lock_feet`: the foot rule, loaded feet held still (module doc, 5). `mirror`: (N,) bool, bodies whose
+        primitive the prior makes for their mirror image (`mirrored_seed_markers`), mirrored back."""
         count = len(z)
         bodies = torch.arange(count, device=z.device)
         first = seed.joints[bodies, 2 - seed.seed_frames]  # (N, 22, 3) first seed frame
         frame = canonical_frame(first)
         seed_slot = torch.stack([2 - seed.seed_frames, torch.ones_like(seed.seed_frames)], dim=1)  # (N, 2) in order
+        mirrored = torch.zeros(count, dtype=torch.bool, device=z.device) if mirror is None else mirror.to(z.device)
+        if mirrored.any() and self.predictor_2f.config.goal_features:
+            raise ValueError("mirror needs a predictor without goal features (the g-CVAE's are not mirrored)")
         parts = []
-        for frames, model in ((1, "predictor_1f"), (2, "predictor_2f")):
-            rows = torch.nonzero(seed.seed_frames == frames).flatten()
-            if len(rows):  # two batched groups, not a loop over bodies
+        for (frames, model), flip in itertools.product(((1, "predictor_1f"), (2, "predictor_2f")), (False, True)):
+            rows = torch.nonzero((seed.seed_frames == frames) & (mirrored == flip)).flatten()
+            if len(rows):  # up to four batched groups, not a loop over bodies
                 group_frame = CanonicalFrame(frame.origin[rows], frame.rotation[rows])
                 parts.append((rows, self._group(seed, rows, seed_slot[rows, 2 - frames :], group_frame, model, z[rows],
-                                                None if goal is None else goal[rows], first[rows], lock_feet)))  # fmt: skip
+                                                None if goal is None else goal[rows], first[rows], lock_feet, flip)))  # fmt: skip
         fields = _merge(parts, count)
         lowest_sole = fields.pop("lowest_sole")
         if ground_feet:
@@ -267,15 +292,20 @@ class GammaGenerator(torch.nn.Module):
         return primitive, next_seed
 
     def _group(self, seed: GammaSeed, rows: torch.Tensor, slots: torch.Tensor, frame: CanonicalFrame, model: str,
-               z: torch.Tensor, goal: torch.Tensor | None, first: torch.Tensor, lock_feet: bool) -> dict[str, torch.Tensor]:  # fmt: skip
+               z: torch.Tensor, goal: torch.Tensor | None, first: torch.Tensor, lock_feet: bool,
+               mirrored: bool = False) -> dict[str, torch.Tensor]:  # fmt: skip
         """The primitive of the M bodies `rows` whose seeds have S = `slots.shape[1]` frames (their slots in the
         seed: (M, S)): the 10 - S new frames predicted, regressed to bodies and re-projected (only those: the S seed
         frames are the seed's own bodies and markers), with `lock_feet` the legs fitted, then the seed frames put in
-        front. Returns `Primitive`'s fields, (M, 10, ...) each, and "lowest_sole" (M, 10): each new frame's lowest
-        sole point (0 at seed frames)."""
+        front. `mirrored`: predicted and regressed for the seeds' mirror images, the bodies mirrored back and the
+        prediction carried over as its offsets from their markers. Returns `Primitive`'s fields, (M, 10, ...) each,
+        and "lowest_sole" (M, 10): each new frame's lowest sole point (0 at seed frames)."""
         frames = slots.shape[1]
         seed_world = {name: getattr(seed, name)[rows[:, None], slots] for name in SEED_FIELDS}  # (M, S, ...)
-        group_seed = to_canonical(seed_world["markers"].flatten(1, 2), frame).unflatten(1, (frames, -1))  # (M, S, 67, 3)
+        if mirrored:
+            group_seed = self._mirrored_markers(seed_world, frame)
+        else:
+            group_seed = to_canonical(seed_world["markers"].flatten(1, 2), frame).unflatten(1, (frames, -1))  # (M, S, 67, 3)
         condition = group_seed.flatten(2)
         if getattr(self, model).config.goal_features:
             if goal is None:
@@ -288,13 +318,24 @@ class GammaGenerator(torch.nn.Module):
             future = rotate_about_centroids(future.float(), -self.heading_calibration.correction(model)).to(dtype)
         regressed = {name: value.float() for name, value in self._network("regressor")(future).items()}
         future = future.float()  # canonical coordinates
-        transl = to_world(regressed["transl"], frame)
-        orient_matrix = frame.rotation[:, None] @ rotation_matrix(regressed["global_orient"])
+        canonical_transl = regressed["transl"]
+        canonical_orient = rotation_matrix(regressed["global_orient"])
         pose_matrix = rotation_matrix(regressed["body_pose"])  # made orthonormal once, for the body and the reward
+        if mirrored:  # the prediction's offsets from its own bodies' markers, then those bodies mirrored back
+            offsets = future - self.body.skin_with_rows(self.body.from_matrices(canonical_transl, canonical_orient, pose_matrix),
+                                                        self.marker_rows)  # fmt: skip
+            canonical_transl, canonical_orient = mirror_points(canonical_transl), mirror_rotations(canonical_orient)
+            pose_matrix = mirror_body_pose(pose_matrix)
+        transl = to_world(canonical_transl, frame)
+        orient_matrix = frame.rotation[:, None] @ canonical_orient
         posed = self.body.from_matrices(transl, orient_matrix, pose_matrix)
         orient, pose = matrix_to_sixd(orient_matrix), matrix_to_sixd(pose_matrix)  # new tensors, orthonormal
         reprojected = self.body.skin_with_rows(posed, self.marker_rows)
-        predicted = to_world(future.flatten(1, 2), frame).unflatten(1, (-1, future.shape[2]))
+        if mirrored:
+            turn = CanonicalFrame(torch.zeros_like(frame.origin), frame.rotation)  # offsets turn, they do not move
+            predicted = reprojected + to_world(mirror_marker_offsets(offsets).flatten(1, 2), turn).unflatten(1, (-1, offsets.shape[2]))
+        else:
+            predicted = to_world(future.flatten(1, 2), frame).unflatten(1, (-1, future.shape[2]))
         markers = seed_world["markers"].new_empty((len(rows), PRIMITIVE_FRAMES, *predicted.shape[2:]))
         markers[:, :frames] = seed_world["markers"]
         torch.lerp(predicted, reprojected, BLEND_FACTOR, out=markers[:, frames:])  # (1 − f) predicted + f re-projected

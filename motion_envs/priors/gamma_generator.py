@@ -42,6 +42,12 @@ minus the predictor's measured heading bias at that frame (`motion_envs.priors.g
 predictor turns its bodies 1-2° per primitive one way, and the hip-based canonical frame compounds it into
 whole turns). Off by default: every shipped policy was trained on the uncorrected prior.
 
+With `mirror` (per body) the prior makes the primitive of the seed's mirror image (`mirrored_seed_markers`:
+the seed bodies mirrored pose by pose, as the training data's mirror images are, skinned, plus the blend's offsets
+carried marker to marker), and the regressed bodies are mirrored back pose by pose; the prediction comes back as
+its offsets from their markers (the SSM2 marker set is not left/right symmetric, so markers do not mirror by
+index). GammaReach's `mirror_right_goals` uses it: the trained predictors turn left far more readily than right.
+
 Seed frames are part of every primitive (frames 0..S-1), so a primitive always
 has 10 frames; the 10 - S after the seed are new.
 

@@ -226,6 +226,8 @@ CLONED_CENTRE = ", KL to N(cloned, I)"
 """Label suffix of policies trained with `--kl-mean cloned` (`*_cloned.zip`)."""
 CALIBRATED_PRIOR = ", heading-calibrated prior"
 """Label suffix of policies trained on the prior with its heading calibration (`--env-option heading_calibration=true`)."""
+MIRRORED_RIGHT_GOALS = ", trained with right goals mirrored"
+"""Label suffix of policies trained with `--env-option mirror_right_goals=true`."""
 
 
 def policy_label(path: Path) -> str:
@@ -236,13 +238,19 @@ def policy_label(path: Path) -> str:
     reward = (policy.trained_for.env_kwargs if policy.trained_for else {}).get("reward", "paper")
     return (f"policy({policy.alpha:g})" + ("" if reward == "paper" else f", {reward} reward")
             + (CLONED_CENTRE if policy.kl_mean == "cloned" else "")
-            + (CALIBRATED_PRIOR if trained_with_heading_calibration(path) else ""))  # fmt: skip
+            + (CALIBRATED_PRIOR if trained_with_heading_calibration(path) else "")
+            + (MIRRORED_RIGHT_GOALS if trained_with(path, "mirror_right_goals") else ""))  # fmt: skip
 
 
 def trained_with_heading_calibration(path: Path) -> bool:
     """Whether the policy in `path` was trained on the prior with its heading calibration (its env options)."""
+    return trained_with(path, "heading_calibration")
+
+
+def trained_with(path: Path, option: str) -> bool:
+    """Whether the policy in `path` was trained with the boolean GammaReach env option `option` on."""
     trained = read_policy_file(path).trained_for
-    return bool(trained and trained.env_kwargs.get("heading_calibration"))
+    return bool(trained and trained.env_kwargs.get(option))
 
 
 BF16_CHECK = (20, 8)
@@ -344,7 +352,8 @@ def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False,
     `policies`: GammaReach policy files to evaluate in place of the shipped ones (e.g. one trained on RLlib);
     `weights_dir`: a folder holding a GAMMA prior and its policies, used for both (default: the shipped ones);
     `mirror_right_goals`: every row but the g-CVAE's (whose goal features are not mirrored) with bodies whose goal
-    starts on their right living in their mirror image (`GammaReachConfig.mirror_right_goals`)."""
+    starts on their right living in their mirror image (`GammaReachConfig.mirror_right_goals`; a policy trained
+    with it runs so in any case, as one trained with the heading calibration runs on the calibrated prior)."""
     if quick:
         pairs, clones = 20, 8
     began, requested = time.perf_counter(), precision
@@ -360,13 +369,15 @@ def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False,
     evaluated = ({policy_label(path): path for path in shipped} if policies is None
                  else {f"{policy_label(path)} ({path})": path for path in policies})  # fmt: skip
     for label, path in evaluated.items():
-        runs[label] = row("policy", path, clones=clones, heading_calibration=trained_with_heading_calibration(path))
+        runs[label] = row("policy", path, clones=clones, heading_calibration=trained_with_heading_calibration(path),
+                          mirror_right_goals=mirror_right_goals or trained_with(path, "mirror_right_goals"))  # fmt: skip
     searched = ("policy(10)", "policy(1)", "policy(10)" + CLONED_CENTRE)
-    searchers = {label: path for label, path in evaluated.items() if label.removesuffix(CALIBRATED_PRIOR) in searched}
+    searchers = {label: path for label, path in evaluated.items() if label.removesuffix(MIRRORED_RIGHT_GOALS).removesuffix(CALIBRATED_PRIOR) in searched}
     costs = (("", "release"), (", distance cost", "distance"))
     for (label, path), keep, (cost_name, cost) in itertools.product(searchers.items(), (1, 4), costs):
         runs[f"{label} & top{keep}{cost_name}"] = row("policy", path, keep=keep, cost=cost,
-                                                      heading_calibration=trained_with_heading_calibration(path))  # fmt: skip
+                                                      heading_calibration=trained_with_heading_calibration(path),
+                                                      mirror_right_goals=mirror_right_goals or trained_with(path, "mirror_right_goals"))  # fmt: skip
     searcher = searchers.get("policy(10)")
     runs["random z & top4"] = row("random", keep=4)
     rows = run_rows(runs, pairs, seed, ray_address)

@@ -238,13 +238,8 @@ def policy_label(path: Path) -> str:
     reward = (policy.trained_for.env_kwargs if policy.trained_for else {}).get("reward", "paper")
     return (f"policy({policy.alpha:g})" + ("" if reward == "paper" else f", {reward} reward")
             + (CLONED_CENTRE if policy.kl_mean == "cloned" else "")
-            + (CALIBRATED_PRIOR if trained_with_heading_calibration(path) else "")
+            + (CALIBRATED_PRIOR if trained_with(path, "heading_calibration") else "")
             + (MIRRORED_RIGHT_GOALS if trained_with(path, "mirror_right_goals") else ""))  # fmt: skip
-
-
-def trained_with_heading_calibration(path: Path) -> bool:
-    """Whether the policy in `path` was trained on the prior with its heading calibration (its env options)."""
-    return trained_with(path, "heading_calibration")
 
 
 def trained_with(path: Path, option: str) -> bool:
@@ -368,16 +363,16 @@ def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False,
     shipped = sorted(Path(weights_dir or WEIGHTS_DIR).glob("ppo_gammareach_*.zip"))
     evaluated = ({policy_label(path): path for path in shipped} if policies is None
                  else {f"{policy_label(path)} ({path})": path for path in policies})  # fmt: skip
+    options = {path: {"heading_calibration": trained_with(path, "heading_calibration"),  # the env the policy knows
+                      "mirror_right_goals": mirror_right_goals or trained_with(path, "mirror_right_goals")}
+               for path in evaluated.values()}  # fmt: skip
     for label, path in evaluated.items():
-        runs[label] = row("policy", path, clones=clones, heading_calibration=trained_with_heading_calibration(path),
-                          mirror_right_goals=mirror_right_goals or trained_with(path, "mirror_right_goals"))  # fmt: skip
+        runs[label] = row("policy", path, clones=clones, **options[path])
     searched = ("policy(10)", "policy(1)", "policy(10)" + CLONED_CENTRE)
     searchers = {label: path for label, path in evaluated.items() if label.removesuffix(MIRRORED_RIGHT_GOALS).removesuffix(CALIBRATED_PRIOR) in searched}
     costs = (("", "release"), (", distance cost", "distance"))
     for (label, path), keep, (cost_name, cost) in itertools.product(searchers.items(), (1, 4), costs):
-        runs[f"{label} & top{keep}{cost_name}"] = row("policy", path, keep=keep, cost=cost,
-                                                      heading_calibration=trained_with_heading_calibration(path),
-                                                      mirror_right_goals=mirror_right_goals or trained_with(path, "mirror_right_goals"))  # fmt: skip
+        runs[f"{label} & top{keep}{cost_name}"] = row("policy", path, keep=keep, cost=cost, **options[path])
     searcher = searchers.get("policy(10)")
     runs["random z & top4"] = row("random", keep=4)
     rows = run_rows(runs, pairs, seed, ray_address)

@@ -37,12 +37,12 @@ def _real(name: str) -> Path:
     return Path(training.__file__).parent / "weights" / name
 
 
-def _run(folder: Path, name: str, record: dict, env_options: dict | None = None) -> Path:
-    """A run folder holding `name` (a copy of the real policy, its saved env options replaced when given) and its
-    manifest record."""
+def _run(folder: Path, name: str, record: dict, env_options: dict | None = None, copy_of: str = POLICY) -> Path:
+    """A run folder holding `name` (a copy of the shipped policy `copy_of`, its saved env options replaced when
+    given) and its manifest record."""
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / name
-    with zipfile.ZipFile(_real(POLICY)) as source, zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as target:
+    with zipfile.ZipFile(_real(copy_of)) as source, zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as target:
         for item in source.infolist():
             contents = source.read(item.filename)
             if item.filename == "data" and env_options is not None:
@@ -110,3 +110,14 @@ def test_train_ship_into_the_package_names_what_it_replaces(package):
     training.ship(nn.Linear(2, 2), weights, {"kind": "tiny", "command": "train two"})
     record = json.loads((package / "manifest.json").read_text())["tiny.pt"]
     assert record["command"] == "train two" and record["replaces"]["command"] == "train one"
+
+
+def test_bench_gamma_runs_a_policy_trained_with_mirrored_goals_mirrored(tmp_path):
+    """A policy trained with `--env-option mirror_right_goals=true` knows only goals on its left: `bench gamma`
+    must run it so (as a heading-calibrated one on the calibrated prior) and say so in its label."""
+    from benchmarks.gamma_control import MIRRORED_RIGHT_GOALS, policy_label, trained_with
+
+    shipped = "ppo_gammareach_alpha1_paper.zip"
+    mirrored = _run(tmp_path, "mirrored.zip", {}, {"reward": "paper", "mirror_right_goals": True}, copy_of=shipped)
+    assert trained_with(mirrored, "mirror_right_goals") and not trained_with(_real(shipped), "mirror_right_goals")
+    assert policy_label(mirrored) == "policy(1)" + MIRRORED_RIGHT_GOALS

@@ -344,25 +344,4 @@ def test_bench_gamma_labels_a_policy_by_what_its_file_holds_not_by_its_name(tmp_
     assert policy_label(renamed) == "policy(10)" + CLONED_CENTRE
     assert policy_label(WEIGHTS_DIR / "ppo_gammareach_alpha10_release.zip") == "policy(10), release reward"
 
-
-def test_bench_gamma_runs_a_policy_trained_with_mirrored_goals_mirrored(tmp_path):
-    """A policy trained with `--env-option mirror_right_goals=true` knows only goals on its left: `bench gamma`
-    must run it so (as a heading-calibrated one on the calibrated prior) and say so in its label."""
-    import json
-    import zipfile
-
-    from benchmarks.gamma_control import MIRRORED_RIGHT_GOALS, policy_label, trained_with
-
-    source_path = WEIGHTS_DIR / "ppo_gammareach_alpha1_paper.zip"
-    mirrored = tmp_path / "mirrored.zip"
-    with zipfile.ZipFile(source_path) as source, zipfile.ZipFile(mirrored, "w") as target:
-        for item in source.infolist():
-            contents = source.read(item.filename)
-            if item.filename == "data":
-                data = json.loads(contents)
-                data["trained_for"]["env_kwargs"]["mirror_right_goals"] = True
-                contents = json.dumps(data).encode()
-            target.writestr(item, contents)
-    assert trained_with(mirrored, "mirror_right_goals") and not trained_with(source_path, "mirror_right_goals")
-    assert policy_label(mirrored) == "policy(1)" + MIRRORED_RIGHT_GOALS
     assert read_policy_file(GAMMA_POLICY).alpha == 1.0 and read_policy_file(MEMORY_POLICY).alpha is None

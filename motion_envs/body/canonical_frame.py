@@ -38,14 +38,25 @@ def canonical_frame(joints: torch.Tensor) -> CanonicalFrame:
 def to_canonical(points: torch.Tensor, frame: CanonicalFrame) -> torch.Tensor:
     """(..., P, 3) world points -> canonical coordinates; frame batch (...)."""
     cos, sin = _turn_of(frame)
-    origin = frame.origin[..., None, :]
-    return _turned(points, cos, -sin, _turned(-origin, cos, -sin, torch.zeros_like(origin)))
+    return _turned(points, cos, -sin, vectors_to_canonical(-frame.origin[..., None, :], frame))
 
 
 def to_world(points: torch.Tensor, frame: CanonicalFrame) -> torch.Tensor:
     """(..., P, 3) canonical points -> world coordinates; frame batch (...)."""
     cos, sin = _turn_of(frame)
     return _turned(points, cos, sin, frame.origin[..., None, :])
+
+
+def vectors_to_canonical(vectors: torch.Tensor, frame: CanonicalFrame) -> torch.Tensor:
+    """(..., P, 3) world displacements (differences of points) -> canonical axes: turned, not moved."""
+    cos, sin = _turn_of(frame)
+    return _turned(vectors, cos, -sin, torch.zeros_like(frame.origin[..., None, :]))
+
+
+def vectors_to_world(vectors: torch.Tensor, frame: CanonicalFrame) -> torch.Tensor:
+    """(..., P, 3) displacements in canonical axes -> world axes: turned, not moved."""
+    cos, sin = _turn_of(frame)
+    return _turned(vectors, cos, sin, torch.zeros_like(frame.origin[..., None, :]))
 
 
 def _turn_of(frame: CanonicalFrame) -> tuple[torch.Tensor, torch.Tensor]:

@@ -15,7 +15,7 @@ from functools import lru_cache
 
 import torch
 
-from motion_envs.body.skeleton import MIRROR_JOINTS
+from motion_envs.body.skeleton import MIRROR_JOINTS, rest_body
 
 POSE_SWAP = torch.tensor([joint - 1 for joint in MIRROR_JOINTS[1:]])
 """(21,) the body_pose row of each joint's left/right counterpart."""
@@ -39,13 +39,9 @@ def mirror_body_pose(pose: torch.Tensor) -> torch.Tensor:
 @lru_cache(maxsize=1)
 def marker_partners() -> torch.Tensor:
     """(67,) long: for each marker, the marker nearest to its mirror image on the rest body (module doc)."""
-    from motion_envs.body import BodyModel
     from motion_envs.body.markers import marker_ids
 
-    body = BodyModel()
-    zero = torch.zeros
-    posed = body(zero(3), zero(3), zero(21, 3))
-    rest = body.skin_with_rows(posed, body.skin_rows(marker_ids()))  # (67, 3)
+    rest = torch.as_tensor(rest_body().vertices[marker_ids().numpy()], dtype=torch.float32)  # (67, 3)
     return torch.cdist(mirror_points(rest), rest).argmin(dim=1)
 
 

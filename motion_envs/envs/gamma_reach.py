@@ -179,10 +179,11 @@ class GammaReachConfig:
     they see the mirror image's observation (`GammaGenerator.mirrored_seed_markers`, the goal reflected), and the
     prior makes the mirror image's primitives, mirrored back (`GammaGenerator.step`'s `mirror`). Decided once per
     episode: deciding per primitive made the alpha = 10 (cloned) policy, which approaches a goal holding it a
-    little to one side, switch back and forth (per body 0.82 -> 0.71, 100 pairs x 8 bodies). Ours, not GAMMA's: the trained prior turns left far more readily than right (`bench gamma-turns`),
-    so policies reach goals on the left (per body 0.99) and fail those on the right (0.64, `gamma_control_fp32.md`);
-    the prior trains on every clip and its mirror image, so the mirror image's motion is as much the prior's own.
-    Off by default: the shipped policies were trained without it (they need no retraining: they see left goals)."""
+    little to one side, switch back and forth (per body 0.82 -> 0.71, 100 pairs x 8 bodies). Ours, not GAMMA's:
+    the trained prior turns left far more readily than right (`bench gamma-turns`), so policies reach goals on
+    the left (per body 0.99) and fail those on the right (0.64, `gamma_control_fp32.md`); the prior trains on
+    every clip and its mirror image, so the mirror image's motion is as much the prior's own. Off by default:
+    the shipped policies were trained without it (they need no retraining: they see left goals)."""
     stooping: float = 0.0
     """Per new frame and metre that the head is lower than `upright_head`, subtracted from the reward (ours, not
     GAMMA's; 0: off). GAMMA's reward has no posture term, and its policies walk hunched, the head hanging forward

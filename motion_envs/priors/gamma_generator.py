@@ -78,7 +78,15 @@ from motion_envs.body.mirror import mirror_body_pose, mirror_marker_offsets, mir
 from motion_envs.body.soles import sole_hull_vertex_ids
 from motion_envs.body.rotations import matrix_to_sixd, rotation_matrix
 from motion_envs.data.primitives import GAMMA_FPS, PRIMITIVE_FRAMES
-from motion_envs.body.canonical_frame import CanonicalFrame, canonical_frame, goal_observation, to_canonical, to_world
+from motion_envs.body.canonical_frame import (
+    CanonicalFrame,
+    canonical_frame,
+    goal_observation,
+    to_canonical,
+    to_world,
+    vectors_to_canonical,
+    vectors_to_world,
+)
 from motion_envs.priors.gamma import MarkerCVAE, PoseVAE, goal_conditioned_seed
 from motion_envs.priors.gamma_heading import CALIBRATION_FILE, HeadingCalibration, load_heading_calibration, rotate_about_centroids
 from motion_envs.priors.train_gamma import load_predictor
@@ -254,14 +262,13 @@ class GammaGenerator(torch.nn.Module):
     def _mirrored_markers(self, seed: dict[str, torch.Tensor], frame: CanonicalFrame) -> torch.Tensor:
         """`mirrored_seed_markers` of seed fields (M, S, ...) -> (M, S, 67, 3)."""
         frames = seed["transl"].shape[1]
-        canonical = {name: to_canonical(seed[name].flatten(1, 2), frame).unflatten(1, (frames, -1))
-                     for name in ("markers", "body_markers")}  # fmt: skip
+        offsets = vectors_to_canonical((seed["markers"] - seed["body_markers"]).flatten(1, 2), frame).unflatten(1, (frames, -1))
         transl = to_canonical(seed["transl"], frame)
         orient = frame.rotation.mT[:, None] @ rotation_matrix(seed["global_orient"])
         posed = self.body.from_matrices(mirror_points(transl), mirror_rotations(orient),
                                         mirror_body_pose(rotation_matrix(seed["body_pose"])))  # fmt: skip
         body_markers = self.body.skin_with_rows(posed, self.marker_rows)
-        return body_markers + mirror_marker_offsets(canonical["markers"] - canonical["body_markers"])
+        return body_markers + mirror_marker_offsets(offsets)
 
     @torch.no_grad()
     def step(self, seed: GammaSeed, z: torch.Tensor, goal: torch.Tensor | None = None,
@@ -338,8 +345,7 @@ class GammaGenerator(torch.nn.Module):
         orient, pose = matrix_to_sixd(orient_matrix), matrix_to_sixd(pose_matrix)  # new tensors, orthonormal
         reprojected = self.body.skin_with_rows(posed, self.marker_rows)
         if mirrored:
-            turn = CanonicalFrame(torch.zeros_like(frame.origin), frame.rotation)  # offsets turn, they do not move
-            predicted = reprojected + to_world(mirror_marker_offsets(offsets).flatten(1, 2), turn).unflatten(1, (-1, offsets.shape[2]))
+            predicted = reprojected + vectors_to_world(mirror_marker_offsets(offsets).flatten(1, 2), frame).unflatten(1, (-1, offsets.shape[2]))
         else:
             predicted = to_world(future.flatten(1, 2), frame).unflatten(1, (-1, future.shape[2]))
         markers = seed_world["markers"].new_empty((len(rows), PRIMITIVE_FRAMES, *predicted.shape[2:]))

@@ -337,11 +337,11 @@ def test_bench_gamma_labels_a_policy_by_what_its_file_holds_not_by_its_name(tmp_
     """`bench gamma --policies` labelled a renamed policy from its file name ("policy(a1), warm_617k reward")."""
     import shutil
 
-    from benchmarks.gamma_control import CLONED_CENTRE, policy_label
+    from benchmarks.gamma_control import CLONED_CENTRE, MIRRORED_RIGHT_GOALS, policy_label
 
     renamed = tmp_path / "my_finetune.zip"
     shutil.copy(WEIGHTS_DIR / "ppo_gammareach_alpha10_paper_cloned.zip", renamed)
-    assert policy_label(renamed) == "policy(10)" + CLONED_CENTRE
+    assert policy_label(renamed) == "policy(10)" + CLONED_CENTRE + MIRRORED_RIGHT_GOALS
     assert policy_label(WEIGHTS_DIR / "ppo_gammareach_alpha10_release.zip") == "policy(10), release reward"
 
     assert read_policy_file(GAMMA_POLICY).alpha == 1.0 and read_policy_file(MEMORY_POLICY).alpha is None

@@ -55,7 +55,7 @@ from agents.policy_files import read_policy_file
 from baselines.g_cvae import G_CVAE_WEIGHTS, goal_cvae_generator
 from baselines.latent_controllers import RandomLatent
 from benchmarks.fanout import group_seed, run_grouped, spans
-from benchmarks.machine import machine_line
+from benchmarks.machine import bench_command, machine_line
 from motion_envs.plots import grid_of_axes, save, top_down
 from motion_envs.atomic import atomic_write
 from motion_envs.body.markers import foot_vertex_ids, sole_vertex_ids
@@ -339,21 +339,6 @@ def table(rows: dict[str, dict], paper: dict[str, tuple] | None = None) -> list[
     return lines
 
 
-def bench_command(quick: bool = False, pairs: int = 100, clones: int = 32, seed: int = 0, bf16: bool = False,
-                  precision: str = "auto", output: str | None = None, ray_address: str | None = None,
-                  weights_dir: Path | None = None, mirror_right_goals: bool = False,
-                  policies: list[Path] | None = None) -> str:  # fmt: skip
-    """The `motion-envs bench gamma` command line that reruns `main` with these arguments (pairs and clones as
-    given, before `quick` sets its own), for the results file."""
-    sizes = "" if quick else "".join(f" --{name} {value}" for name, value, default in (("pairs", pairs, 100), ("clones", clones, 32)) if value != default)
-    return (f"motion-envs bench gamma{' --quick' if quick else ''}{sizes}{f' --seed {seed}' if seed else ''}"
-            f"{' --bf16' if bf16 else ''}{'' if precision == 'auto' else ' --precision ' + precision}"
-            f"{' --output ' + output if output else ''}{'' if ray_address is None else ' --ray ' + ray_address}"
-            f"{'' if weights_dir is None else ' --weights-dir ' + str(weights_dir)}"
-            f"{' --mirror-right-goals' if mirror_right_goals else ''}"
-            f"{'' if not policies else ' --policies ' + ' '.join(str(path) for path in policies)}")  # fmt: skip
-
-
 def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False, bf16: bool = False,
          precision: str = "auto", output: str | None = None, ray_address: str | None = None,
          policies: list[Path] | None = None, weights_dir: Path | None = None, mirror_right_goals: bool = False) -> int:  # fmt: skip
@@ -364,6 +349,11 @@ def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False,
     `mirror_right_goals`: every row but the g-CVAE's (whose goal features are not mirrored) with bodies whose goal
     starts on their right living in their mirror image (`GammaReachConfig.mirror_right_goals`; a policy trained
     with it runs so in any case, as one trained with the heading calibration runs on the calibrated prior)."""
+    command = bench_command("gamma", {"quick": quick, "pairs": pairs, "clones": clones, "seed": seed, "bf16": bf16,
+                                      "precision": precision, "output": output, "ray": ray_address,
+                                      "weights-dir": weights_dir, "mirror-right-goals": mirror_right_goals,
+                                      "policies": policies},
+                            {"pairs": 100, "clones": 32, "seed": 0, "precision": "auto"})  # fmt: skip
     if quick:
         pairs, clones = 20, 8
     began, requested = time.perf_counter(), precision
@@ -429,9 +419,6 @@ def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False,
             checks[f"policy(10), {name} prior"] = summarise([{**part, "seconds": time.perf_counter() - tick}])
         lines += ["", f"bf16 check: the first {subset.num_bodies} pairs × {check_clones} clones, the prior's networks in fp32 "
                   "and in bf16 (`GammaReachConfig.precision`), same policy and seed.", "", *table(checks)]  # fmt: skip
-    command = bench_command(quick=quick, pairs=pairs, clones=clones, seed=seed, bf16=bf16, precision=requested,
-                            output=output, ray_address=ray_address, weights_dir=weights_dir,
-                            mirror_right_goals=mirror_right_goals, policies=policies)  # fmt: skip
     lines += ["", machine_line(), f"Command: `{command}`; {time.perf_counter() - began:.0f} s in all.", "",
               f"![paths]({stem}.png)", ""]  # fmt: skip
     text = "\n".join(lines)

@@ -39,7 +39,7 @@ from baselines.latent_controllers import RandomLatent
 from baselines.wandr_sampler import WandrSampler
 from baselines.wandr_waypoints import follow_waypoints
 from benchmarks.gamma_control import Recorder, run_clones, run_search
-from benchmarks.machine import machine_line
+from benchmarks.machine import bench_command, machine_line
 from motion_envs.atomic import atomic_write
 from motion_envs.envs.gamma_wander import GammaWanderConfig, GammaWanderCore, GammaWanderState
 from motion_envs.envs.wandr_reach import WandrReachConfig, WandrReachCore
@@ -158,9 +158,11 @@ def main(paths: int = 100, clones: int = 32, repeats: int = 4, rooms: int = 100,
          seed: int = 0, quick: bool = False, policies: list[Path] | None = None, output: str | None = None) -> int:  # fmt: skip
     """`policies`: GammaReach/GammaWander PPO files to compare (default: the shipped wander policy where there is
     one, and GammaReach's α = 1 policy); the first one also drives the search rows and the crowd."""
+    command = bench_command("wander", {"paths": paths, "rooms": rooms, "seed": seed, "quick": quick, "policies": policies,
+                                       "output": output}, {"paths": 100, "rooms": 100, "seed": 0})  # fmt: skip
     if quick:
         paths, clones, repeats, rooms, crowd_seconds = 20, 8, 2, 10, 10.0
-    given, policies = policies, policies or [path for path in (WANDER_POLICY, POLICY) if path.exists()]
+    policies = policies or [path for path in (WANDER_POLICY, POLICY) if path.exists()]
     labels = {policy_label(path): path for path in policies}
     main_label, main_policy = next(iter(labels.items()))
     began = time.perf_counter()
@@ -202,8 +204,7 @@ def main(paths: int = 100, clones: int = 32, repeats: int = 4, rooms: int = 100,
               "| wall s | × real time |", "|---|---|---|---|---|---|---|",
               f"| {crowd.bodies} | {crowd.motion_seconds:.0f} | {crowd.arrivals_per_minute:.1f} | {crowd.collided:.3f} | "
               f"{crowd.overlapping:.3f} | {crowd.wall_seconds:.0f} | {crowd.realtime_factor:.2f} |", "",
-              machine_line(), f"Command: `motion-envs bench wander{' --quick' if quick else ''}"
-              f"{' --policies ' + ' '.join(str(p) for p in given) if given else ''}{' --output ' + output if output else ''}`; "
+              machine_line(), f"Command: `{command}`; "
               f"{time.perf_counter() - began:.0f} s in all.", "", f"![paths]({stem}.png)", ""]  # fmt: skip
     text = "\n".join(lines)
     print(text)

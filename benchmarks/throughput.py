@@ -27,7 +27,7 @@ import torch
 from torch.utils.flop_counter import FlopCounterMode, register_flop_formula
 
 from agents.vec_env import NativeVecEnv
-from benchmarks.machine import machine_line
+from benchmarks.machine import bench_command, machine_line
 from benchmarks.sections import replace_section
 from motion_envs.envs.gamma_reach import GammaReachConfig, GammaReachCore, GammaReachState, GammaReachVectorEnv
 from motion_envs.precision import native_bf16, resolve_precision
@@ -44,7 +44,7 @@ TARGETS = {"float32": 5_000, "bfloat16": 10_000}
 
 def command_line(bench: str, output: str) -> str:
     """The `motion-envs bench` command that wrote a throughput section to `output` (a results file stem)."""
-    return f"motion-envs bench {bench}" + ("" if output == "throughput" else f" --output {output}")
+    return bench_command(bench, {"output": output}, {"output": "throughput"})
 
 
 def best_seconds(run: Callable[[], object], repeats: int) -> float:

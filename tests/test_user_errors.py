@@ -347,19 +347,22 @@ def test_bench_gamma_labels_a_policy_by_what_its_file_holds_not_by_its_name(tmp_
     assert read_policy_file(GAMMA_POLICY).alpha == 1.0 and read_policy_file(MEMORY_POLICY).alpha is None
 
 
-def test_bench_gamma_results_record_the_command_that_reruns_them():
+def test_bench_results_record_the_command_that_reruns_them():
     """A results file from `bench gamma --seed 1 --clones 16 --policies ...` named only `--policies ...`, so a rerun
-    from its Command line measured other pairs with twice the clones."""
+    from its Command line measured other pairs with twice the clones (`bench wander` left out --paths, --rooms and
+    --seed the same way)."""
     from pathlib import Path
 
-    from benchmarks.gamma_control import bench_command
+    from benchmarks.machine import bench_command
     from motion_envs.cli import parser
 
     policies = [Path("runs/old.zip"), Path("new.zip")]
-    command = bench_command(pairs=50, clones=16, seed=1, precision="float32", mirror_right_goals=True, policies=policies)
-    args = parser().parse_args(command.split()[1:])
+    defaults = {"pairs": 100, "clones": 32, "seed": 0, "precision": "auto"}
+    options = {"quick": False, "pairs": 50, "clones": 16, "seed": 1, "precision": "float32", "ray": None,
+               "mirror-right-goals": True, "policies": policies}  # fmt: skip
+    args = parser().parse_args(bench_command("gamma", options, defaults).split()[1:])
     assert (args.pairs, args.clones, args.seed, args.precision) == (50, 16, 1, "float32")
-    assert args.mirror_right_goals and args.policies == policies and not args.quick
-    assert bench_command() == "motion-envs bench gamma"
-    quick = parser().parse_args(bench_command(quick=True, pairs=20, clones=8).split()[1:])
-    assert quick.quick and (quick.pairs, quick.clones) == (100, 32)  # --quick sets its own sizes
+    assert args.mirror_right_goals and args.policies == policies and not args.quick and args.ray is None
+    assert bench_command("gamma", {"quick": False, "pairs": 100, "seed": 0}, defaults) == "motion-envs bench gamma"
+    wander = parser().parse_args(bench_command("wander", {"paths": 30, "rooms": 100, "seed": 2, "quick": True}, {"rooms": 100}).split()[1:])
+    assert (wander.paths, wander.rooms, wander.seed, wander.quick) == (30, 100, 2, True)

@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from benchmarks.machine import machine_line
+from benchmarks.machine import bench_command, machine_line
 from motion_envs.atomic import atomic_write
 from motion_envs.envs.clops_nav import ClopsNavConfig, ClopsNavCore
 from motion_envs.priors.clops import HEAD_JOINT
@@ -76,7 +76,7 @@ def main(weights: list[Path], rooms: int = 8, actions: int = 6) -> int:
              "target's ground distance and turn (the prior's own action set, k-means over the data's one-second head "
              "motions), the head's ground travel per action, the frames per action and the share of actions that used "
              "all 30 frames without reaching the target. "
-             f"`motion-envs bench clops-actions --weights {' '.join(str(path) for path in weights)}`.", machine_line(), ""]  # fmt: skip
+             f"`{bench_command('clops-actions', {'weights': list(weights), 'rooms': rooms})}`.", machine_line(), ""]  # fmt: skip
     for path in weights:
         figures = action_travel(path, rooms, actions)
         order = np.argsort(-figures["targets"][:, 0])

@@ -36,7 +36,7 @@ import torch
 from agents.policy_files import OBSERVATION_FLAGS, read_policy_file
 from agents.train_dqn import OBSERVATION_OPTIONS
 from benchmarks.fanout import group_seed, run_grouped, spans
-from benchmarks.machine import machine_line
+from benchmarks.machine import bench_command, machine_line
 from benchmarks.sections import replace_section
 from motion_envs.atomic import atomic_write
 from motion_envs.envs.clops_nav import ClopsNavConfig, ClopsNavCore, ClopsNavState
@@ -211,7 +211,8 @@ def main(episodes_per_family: int = 100, families: tuple[str, ...] = tuple(FAMIL
     for (label, family), parts in run_grouped(run_shard, tasks, ray_address, "clops episode groups").items():
         rows.setdefault(label, {})[family] = scores = scores_of(parts)
         print(f"{label} on {family}: SR {scores.success:.0f}%  Col {scores.collision:.0f}%  FS {scores.skating:.0f}%")
-    write_results(rows, families, episodes_per_family, time.perf_counter() - started, ray_address)
+    command = bench_command("clops", {"episodes": episodes_per_family, "families": ",".join(families), "seed": seed, "ray": ray_address})
+    write_results(rows, families, episodes_per_family, time.perf_counter() - started, command, ray_address)
     throughput_section(ClopsNavCore(ClopsNavConfig(family=families[0], split="test")), bodies=64, actions=3)
     return 0
 
@@ -235,14 +236,14 @@ def trained_on(label: str) -> str | None:
     return family
 
 
-def write_results(rows: dict[str, dict[str, Scores]], families: tuple[str, ...], count: int, wall: float,
+def write_results(rows: dict[str, dict[str, Scores]], families: tuple[str, ...], count: int, wall: float, command: str,
                   ray_address: str | None = None) -> None:  # fmt: skip
     lines = [
         "# CLOPS scene matrix", "",
         f"{count} episodes per family (its held-out test seeds {TEST_SEEDS.start}-{TEST_SEEDS.start + count - 1}, one each), "
         f"15 s each, the same episodes for every row, in groups of {EPISODES_PER_TASK} (`benchmarks.fanout`) run "
         + ("in this process" if ray_address is None else f"as Ray tasks ({ray_address})")
-        + f". `motion-envs bench clops{'' if ray_address is None else ' --ray ' + ray_address}` ({wall / 60:.0f} min).",
+        + f". `{command}` ({wall / 60:.0f} min).",
         machine_line(), "",
         "SR: goal within 1 m and in view (%); Col: actions with a collision (%); FS: frames whose lowest foot vertex slid > 0.66 cm (%); "
         f"falls: episodes ended by the pelvis falling below {ClopsNavConfig.fall_height} m (%, `ClopsNavConfig.fall_height`; the GAMMA "

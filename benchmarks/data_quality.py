@@ -27,7 +27,7 @@ import torch  # noqa: E402
 from torch.utils import benchmark  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
-from benchmarks.machine import machine_line  # noqa: E402
+from benchmarks.machine import bench_command, data_options, machine_line  # noqa: E402
 from motion_envs.atomic import atomic_write  # noqa: E402
 from motion_envs.body import PARENTS, BodyModel, joint_index  # noqa: E402
 from motion_envs.body.markers import foot_vertex_ids, marker_ids  # noqa: E402
@@ -315,6 +315,7 @@ def timing_lines(mocap_dir: Path) -> list[str]:
 def main(mocap_dir: Path | None = None, cache_dir: Path | None = None, subsets: tuple[str, ...] = SHIPPED_SUBSETS,
          timing: bool = True) -> int:  # fmt: skip
     """`timing=False` (`--no-timing`) leaves out the reader and FK speed sections (for a machine that is busy)."""
+    command = bench_command("data", {**data_options(mocap_dir, subsets), "no-timing": not timing})
     mocap_dir = Path(mocap_dir or default_mocap_dir() or "")
     RESULTS.mkdir(parents=True, exist_ok=True)
     report = build(mocap_dir=mocap_dir, cache_dir=cache_dir, subsets=subsets)
@@ -327,7 +328,7 @@ def main(mocap_dir: Path | None = None, cache_dir: Path | None = None, subsets: 
     lines = [
         "# Data quality",
         "",
-        f"Command: `motion-envs bench data{'' if timing else ' --no-timing'}`. {machine_line()}",
+        f"Command: `{command}`. {machine_line()}",
         f"Source: `{mocap_dir}` subsets {list(subsets)}; cache `{report.caches[30].name}` (uncleaned: "
         f"`{raw_report.caches[30].name}`). {len(report.failures)} clips skipped.",
         "",

@@ -33,7 +33,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from benchmarks.machine import machine_line
+from benchmarks.machine import bench_command, machine_line
 from motion_envs.atomic import atomic_write
 from motion_envs.body import BodyModel
 from motion_envs.body.markers import foot_vertex_ids
@@ -219,7 +219,7 @@ def main(steps: int = 2000, seed: int = 0, episodes: int = 8, weights_dir: Path 
     lines = [
         "# Feet on the floor",
         "",
-        f"Command: `motion-envs bench floor --steps {steps}{f' --weights-dir {weights_dir} --output {output}' if weights_dir else ''}`. "
+        f"Command: `{bench_command('floor', {'steps': steps, 'seed': seed, 'weights-dir': weights_dir, 'output': output})}`. "
         f"Priors: {weights_dir or 'the shipped ones'}. {machine_line()}",
         "",
         f"{steps} env steps per row (episodes restart), one body, every generated frame measured. Floor rule: the",

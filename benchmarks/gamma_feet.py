@@ -23,7 +23,7 @@ import numpy as np
 import torch
 
 from agents.controllers import PolicyLatent
-from benchmarks.machine import machine_line
+from benchmarks.machine import bench_command, machine_line
 from motion_envs.atomic import atomic_write
 from motion_envs.body.foot_lock import MAX_OFFSET
 from motion_envs.body.markers import foot_vertex_ids, sole_vertex_ids
@@ -151,7 +151,8 @@ def main(bodies: int = 128, primitives: int = 30, seed: int = 0, shown: int = 3,
         f"to the data is the predictor's own: its feet drift, and a foot is held at most {MAX_OFFSET * 100:.0f} cm behind them.",
         "",
         machine_line(),
-        f"Command: `motion-envs bench gamma-feet`; {time.perf_counter() - began:.0f} s in all.",
+        f"Command: `{bench_command('gamma-feet', {'bodies': bodies, 'primitives': primitives, 'seed': seed})}`; "
+        f"{time.perf_counter() - began:.0f} s in all.",
         "",
         "![heel and toe paths](gamma_feet.png)",
         "",

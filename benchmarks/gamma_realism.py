@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from benchmarks.machine import machine_line
+from benchmarks.machine import bench_command, data_options, machine_line
 from motion_envs.plots import plt, save, top_down
 from motion_envs.atomic import atomic_write
 from motion_envs.body import BodyModel
@@ -117,6 +117,8 @@ def main(mocap_dir: Path | None = None, cache_dir: Path | None = None, subsets: 
          output: str = "gamma_realism") -> int:  # fmt: skip
     """`weights_dir`: the GAMMA weights to measure (default: the shipped ones); the table is `output`.md."""
     began = time.perf_counter()
+    command = bench_command("gamma-realism", {**data_options(mocap_dir, subsets), "rollouts": rollouts, "weights-dir": weights_dir,
+                                              "output": output, "primitives": primitives, "seed": seed})  # fmt: skip
     body, gamma = BodyModel(), GammaGenerator.load(weights_dir or WEIGHTS_DIR)
     feet_rows, sole_rows = body.skin_rows(foot_vertex_ids()), body.skin_rows(sole_vertex_ids())
 
@@ -168,7 +170,7 @@ def main(mocap_dir: Path | None = None, cache_dir: Path | None = None, subsets: 
         "",
         *prior_lines(),
         machine_line(),
-        f"Command: `motion-envs bench gamma-realism{f' --weights-dir {weights_dir} --output {output}' if weights_dir else ''}`; "
+        f"Command: `{command}`; "
         f"{time.perf_counter() - began:.0f} s in all.",
         "",
         f"![pelvis paths]({output}_paths.png)",

@@ -30,7 +30,7 @@ import numpy as np
 import torch
 
 from agents.controllers import PolicyLatent
-from benchmarks.machine import machine_line
+from benchmarks.machine import bench_command, machine_line
 from motion_envs.atomic import atomic_write
 from motion_envs.body.rotations import matrix_to_sixd, rotation_matrix, wrap_angle
 from motion_envs.data.build import build
@@ -227,7 +227,8 @@ def main(bodies: int = 1024, seed: int = 0) -> int:
     lines += [*training_window_lines(core.generator), ""]
     core.generator.set_heading_calibration(False)
     lines += policy_lines(core, settings, bodies, seed)
-    lines += ["", machine_line(), f"Command: `motion-envs bench gamma-turns`; {time.perf_counter() - began:.0f} s.", ""]
+    lines += ["", machine_line(), f"Command: `{bench_command('gamma-turns', {'bodies': bodies, 'seed': seed})}`; "
+              f"{time.perf_counter() - began:.0f} s.", ""]
     text = "\n".join(lines)
     RESULTS.mkdir(parents=True, exist_ok=True)
     atomic_write(RESULTS / "gamma_turns.md", lambda file: file.write(text.encode()))

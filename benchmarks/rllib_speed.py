@@ -16,7 +16,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from benchmarks.machine import machine_line
+from benchmarks.machine import bench_command, machine_line
 from benchmarks.sections import replace_section
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -110,7 +110,7 @@ def main(bodies: int = 256, updates: int = 2, curve_from: Path | None = None) ->
     base_sampling, base_whole = next(iter(rows.values()))
     lines = ["## PPO throughput", "", machine_line(), "",
              f"GammaReach-v0, {bodies} bodies × 60 primitives per update, α = 10, 256-unit actor-critic, "
-             f"{updates} timed updates after a warm-up one. `motion-envs bench rllib`.", "",
+             f"{updates} timed updates after a warm-up one. `{bench_command('rllib', {'bodies': bodies})}`.", "",
              "| engine | sampling (steps/s) | whole update (steps/s) | sampling vs SB3 | update vs SB3 |",
              "|---|---|---|---|---|"]  # fmt: skip
     for label, (sampling, whole) in rows.items():

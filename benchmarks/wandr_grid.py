@@ -87,7 +87,7 @@ import torch
 from baselines.latent_optimisation import LatentSequence, optimise_latents
 from baselines.wandr_sampler import Controller, WandrSampler, roll_out
 from benchmarks.fanout import run_grouped, spans
-from benchmarks.machine import machine_line
+from benchmarks.machine import bench_command, machine_line
 from benchmarks.sections import replace_rows, replace_section
 from motion_envs.atomic import atomic_write
 from motion_envs.counter_random import BodyNoise
@@ -399,9 +399,12 @@ def main(quick: bool = False, seed: int = 0, weights_dir: Path | None = None, po
     where = ("in this process" if ray_address is None else
              f"as {sum(len(row.shards()) for row in runs.values())} Ray tasks of ≤ {SHARD} rollouts ({ray_address})")  # fmt: skip
     name = "wandr_grid_quick" if quick else "wandr_grid"
+    command = bench_command("wandr", {"quick": quick, "seed": seed, "no-data-fs": not data_fs, "no-optimisation": not optimisation,
+                                      "no-timing": not timing, "variants-dir": variants_dir, "only": only, "ray": ray_address},
+                            {"variants-dir": VARIANTS_DIR})  # fmt: skip
     if only is not None:
         replace_rows(RESULTS / f"{name}.md", {label: table_row(label, row) for label, row in rows.items()}, "| data",
-                     f"Rows containing '{only}' rerun by `motion-envs bench wandr --only '{only}'`: {machine_line()}")  # fmt: skip
+                     f"Rows containing '{only}' rerun by `{command}`: {machine_line()}")  # fmt: skip
         return 0
     main_label = next(iter(by_cell))
     data = data_figures() if data_fs else None
@@ -412,7 +415,7 @@ def main(quick: bool = False, seed: int = 0, weights_dir: Path | None = None, po
              f"{count} rollouts: {ANGLES} angles × {HEIGHTS} heights ({HEIGHT_RANGE[0]}-{HEIGHT_RANGE[1]} m) × "
              f"{DISTANCES} distances ({DISTANCE_RANGE[0]}-{DISTANCE_RANGE[1]} m) × {poses} start poses × {samples} samples, "
              f"≤ 240 frames (8 s) each, in batches of {SHARD} (`benchmarks.fanout`), run {where}: {wall:.0f} s in all. "
-             f"`motion-envs bench wandr{' --quick' if quick else ''}`. Time per row: its batches' seconds, summed.",
+             f"`{command}`. Time per row: its batches' seconds, summed.",
              machine_line(), "", f"| row | SR (%) | FS (%) | DTG (cm) | ½-s windows > {WALK_SPEED:g} m/s (%) "
              "| fastest ½ s, median (m/s) | time (s) |", "|---|---|---|---|---|---|---|"]  # fmt: skip
     for label, row in rows.items():

@@ -39,7 +39,7 @@ from pathlib import Path
 
 import torch
 
-from benchmarks.machine import machine_line
+from benchmarks.machine import bench_command, machine_line
 from motion_envs.atomic import atomic_write
 from motion_envs.body import BodyModel
 from motion_envs.priors.train_wandr import WandrClips, load_wandr
@@ -111,7 +111,7 @@ def main(weights: list[Path], horizon_s: int = 6, min_travel: float = 2.0) -> in
              f"{len(starts)} CMU training windows (mirrored included) whose pelvis travels > {min_travel} m in {horizon_s} s; "
              f"goal: the right wrist at the window's end, due then. Medians at the end of each second: pelvis-to-goal ground "
              f"distance (m), and in brackets the ground path the pelvis has walked (m). "
-             f"`motion-envs bench wandr-pace --weights {' '.join(str(path) for path in weights)}`.", machine_line(), "",
+             f"`{bench_command('wandr-pace', {'weights': list(weights)})}`.", machine_line(), "",
              "| s | " + " | ".join(columns) + " |", "|---" * (len(columns) + 1) + "|"]  # fmt: skip
     for second in range(horizon_s):
         lines.append(f"| {second + 1} | " + " | ".join(f"{left[second]:.2f} ({walked[second]:.2f})" for left, walked in columns.values()) + " |")

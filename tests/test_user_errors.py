@@ -350,19 +350,26 @@ def test_bench_gamma_labels_a_policy_by_what_its_file_holds_not_by_its_name(tmp_
 def test_bench_results_record_the_command_that_reruns_them():
     """A results file from `bench gamma --seed 1 --clones 16 --policies ...` named only `--policies ...`, so a rerun
     from its Command line measured other pairs with twice the clones (`bench wander` left out --paths, --rooms and
-    --seed the same way)."""
+    --seed the same way; the other benches their counts and seeds)."""
+    import shlex
     from pathlib import Path
 
-    from benchmarks.machine import bench_command
+    from benchmarks.machine import bench_command, data_options
     from motion_envs.cli import parser
 
     policies = [Path("runs/old.zip"), Path("new.zip")]
     defaults = {"pairs": 100, "clones": 32, "seed": 0, "precision": "auto"}
     options = {"quick": False, "pairs": 50, "clones": 16, "seed": 1, "precision": "float32", "ray": None,
                "mirror-right-goals": True, "policies": policies}  # fmt: skip
-    args = parser().parse_args(bench_command("gamma", options, defaults).split()[1:])
+    args = parser().parse_args(shlex.split(bench_command("gamma", options, defaults))[1:])
     assert (args.pairs, args.clones, args.seed, args.precision) == (50, 16, 1, "float32")
     assert args.mirror_right_goals and args.policies == policies and not args.quick and args.ray is None
     assert bench_command("gamma", {"quick": False, "pairs": 100, "seed": 0}, defaults) == "motion-envs bench gamma"
-    wander = parser().parse_args(bench_command("wander", {"paths": 30, "rooms": 100, "seed": 2, "quick": True}, {"rooms": 100}).split()[1:])
+    wander = parser().parse_args(shlex.split(bench_command("wander", {"paths": 30, "rooms": 100, "seed": 2, "quick": True}, {"rooms": 100}))[1:])
     assert (wander.paths, wander.rooms, wander.seed, wander.quick) == (30, 100, 2, True)
+    label = "WANDR sampler, paced t_G = 1 s"  # bench wandr --only: a row label, spaces and all
+    wandr = parser().parse_args(shlex.split(bench_command("wandr", {"seed": 0, "no-timing": True, "only": label}))[1:])
+    assert (wandr.seed, wandr.no_timing, wandr.only, wandr.quick) == (0, True, label, False)
+    realism = bench_command("gamma-realism", {**data_options(Path("my mocap"), ("cmu", "hdm05", "extra")), "seed": 3})
+    realism = parser().parse_args(shlex.split(realism)[1:])
+    assert (realism.mocap_dir, realism.subset, realism.seed) == (Path("my mocap"), ["hdm05", "extra"], 3)

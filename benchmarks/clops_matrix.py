@@ -63,13 +63,16 @@ Controller = Callable[[ClopsNavCore, ClopsNavState], torch.Tensor]
 
 @dataclass(frozen=True)
 class Scores:
-    """One row on one family: SR, Col, FS and episodes ended by a fall (`ClopsNavConfig.fall_height`; NaN for the
-    GAMMA navigator, whose bodies are GAMMA's) in %, and the pelvis paths (N, T, 2) and views of episode 0."""
+    """One row on one family: SR, Col, FS, episodes ended by a fall (`ClopsNavConfig.fall_height`), by leaving the
+    room and by the 15-s limit (the last three NaN for the GAMMA navigator, whose bodies are GAMMA's and whose
+    episodes end otherwise) in %, and the pelvis paths (N, T, 2) and views of episode 0."""
 
     success: float
     collision: float
     skating: float
     fallen: float
+    left: float
+    timed_out: float
     seconds: float
     paths: np.ndarray
     views: list[np.ndarray]
@@ -144,21 +147,22 @@ def scores_of(parts: list[dict]) -> Scores:
     """A row's scores on one family from its groups in order (paths and views: the first group's)."""
     found = np.concatenate([part["found"] for part in parts])
     collided, skated = (tuple(map(sum, zip(*(part[key] for part in parts)))) for key in ("collided", "skated"))
-    fallen = np.concatenate([part["fallen"] for part in parts])
+    fallen, left, timed_out = (np.concatenate([part[key] for part in parts]) for key in ("fallen", "left", "timed out"))
     return Scores(100 * float(found.mean()), 100 * collided[0] / max(collided[1], 1), 100 * skated[0] / max(skated[1], 1),
-                  100 * float(fallen.mean()), float(np.concatenate([part["seconds"] for part in parts]).mean()),
+                  100 * float(fallen.mean()), 100 * float(left.mean()), 100 * float(timed_out.mean()),
+                  float(np.concatenate([part["seconds"] for part in parts]).mean()),
                   parts[0]["paths"], parts[0]["views"])  # fmt: skip
 
 
 def run(core: ClopsNavCore, state: ClopsNavState, controller: Controller) -> dict:
     """Step every episode to its end (found, left the room, fallen or 15 s); the core steps every body until the
     last ends, and what a body does after its own end is not counted (one that left the room or fell could walk
-    on to the goal). Returns the counts `scores_of` merges: found (N,), fallen (N,), (collided, actions) and
-    (skated, frames) sums, seconds (N,), the pelvis paths (N, T, 2) and episode 0's views."""
+    on to the goal). Returns the counts `scores_of` merges: found, fallen, left (the room) and timed out (N,) each,
+    (collided, actions) and (skated, frames) sums, seconds (N,), the pelvis paths (N, T, 2) and episode 0's views."""
     count = state.num_bodies
     alive = torch.ones(count, dtype=torch.bool)
     actions, collided = torch.zeros(count), torch.zeros(count)
-    found, fallen = torch.zeros(count, dtype=torch.bool), torch.zeros(count, dtype=torch.bool)
+    found, fallen, left = (torch.zeros(count, dtype=torch.bool) for _ in range(3))
     skated, frames = torch.zeros(count), torch.zeros(count)
     paths, views = [state.joints[:, PELVIS, :2].numpy()], [state.view[0].numpy()]
     while alive.any():
@@ -167,12 +171,14 @@ def run(core: ClopsNavCore, state: ClopsNavState, controller: Controller) -> dic
         collided += (result.collided & alive).float()
         found |= state.found & alive
         fallen |= result.fallen & alive
+        left |= result.left_room & alive
         skated, frames = (torch.where(alive, now.float(), then) for now, then in ((state.skated, skated), (state.frame, frames)))
         paths.append(np.where(alive[:, None].numpy(), state.joints[:, PELVIS, :2].numpy(), np.nan))
         if alive[0]:
             views.append(state.view[0].numpy())
         alive &= ~(result.terminated | result.truncated)
-    return {"found": found.numpy(), "fallen": fallen.numpy(), "collided": (float(collided.sum()), float(actions.sum())),
+    return {"found": found.numpy(), "fallen": fallen.numpy(), "left": left.numpy(), "timed out": (~(found | fallen | left)).numpy(),
+            "collided": (float(collided.sum()), float(actions.sum())),
             "skated": (float(skated.sum()), float(frames.sum())), "seconds": frames.numpy() / 30,
             "paths": np.stack(paths, 1), "views": views}  # fmt: skip
 
@@ -183,7 +189,9 @@ def gamma_row(core: ClopsNavCore, state: ClopsNavState) -> dict:
     from baselines.gamma_navigator import gamma_navigate
 
     stats = gamma_navigate(core, state, PPOKL.load(GAMMA_POLICY, device="cpu"))
-    return {"found": np.asarray(stats.found), "fallen": np.full(len(stats.found), np.nan), "collided": (float(stats.collided_seconds.sum()), float(stats.seconds.sum())),
+    unknown = np.full(len(stats.found), np.nan)
+    return {"found": np.asarray(stats.found), "fallen": unknown, "left": unknown, "timed out": unknown,
+            "collided": (float(stats.collided_seconds.sum()), float(stats.seconds.sum())),
             "skated": (float(stats.skated.sum()), float(stats.frames.sum())), "seconds": np.asarray(stats.seconds, dtype=float),
             "paths": stats.paths, "views": []}  # fmt: skip
 
@@ -260,6 +268,12 @@ def write_results(rows: dict[str, dict[str, Scores]], families: tuple[str, ...],
         split = (f"{by_family[home].success:.0f} | {np.mean([s.success for f, s in by_family.items() if f != home]):.0f}"
                  if home in by_family and len(by_family) > 1 else " | ")  # fmt: skip
         lines.append(f"| {label} | " + " | ".join(cells) + " | " + " | ".join("–" if np.isnan(m) else f"{m:.0f}" for m in means) + f" | {split} |")
+    lines += ["", "How episodes end, per family (%): goal found / left the room / fell / 15 s up (the GAMMA navigator's: found only).", "",
+              "| row | " + " | ".join(families) + " |", "|---|" + "---|" * len(families)]
+    for label, by_family in rows.items():
+        ends = [" / ".join("–" if np.isnan(value) else f"{value:.0f}" for value in (s.success, s.left, s.fallen, s.timed_out))
+                for s in (by_family[f] for f in families if f in by_family)]  # fmt: skip
+        lines.append(f"| {label} | " + " | ".join(ends) + " |")
     lines += ["", "The paper (Replica scenes, its own X cm; Table 2 trains and tests on S1):", "", "| row | SR | Col | FS |", "|---|---|---|---|"]
     lines += [f"| {label} | {sr} | {col} | {fs} |" for label, (sr, col, fs) in PAPER_TABLE2.items()]
     lines += ["", "The paper's Table 1 (rows: train scene, columns: test scene S1-S5), SR / Col %:", ""]

@@ -10,7 +10,8 @@ family, the same starts and goals for every row). Per row and family:
 * Col: % of actions (about 1 s of motion each) during which any collision
   sphere penetrated the scene by more than 2 cm;
 * FS: % of frames whose lowest foot vertex slid more than 0.66 cm (WANDR's
-  measure, the same authors').
+  measure, the same authors');
+* how episodes end: % found, left the room, fallen, out of time (15 s).
 
 Rows beside the DQN policies: uniformly random actions; the non-visual
 GAMMA navigator told the goal (EgoGen-like, `baselines.gamma_navigator`);

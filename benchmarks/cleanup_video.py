@@ -23,7 +23,6 @@ from motion_envs.body import BodyModel
 from motion_envs.body.markers import sole_vertex_ids
 from motion_envs.data.build import build
 from motion_envs.data.canonical import body_tensors
-from motion_envs.data.cleanup import CleanupConfig
 from motion_envs.data.dataset import MotionDataset
 from motion_envs.data.paths import SHIPPED_SUBSETS
 from motion_envs.render.camera import follow_camera

@@ -356,7 +356,7 @@ def main(pairs: int = 100, clones: int = 32, seed: int = 0, quick: bool = False,
                             {"pairs": 100, "clones": 32, "seed": 0, "precision": "auto"})  # fmt: skip
     if quick:
         pairs, clones = 20, 8
-    began, requested = time.perf_counter(), precision
+    began = time.perf_counter()
     folder = None if weights_dir is None else str(weights_dir)
     core = cached_core(precision, False, folder)
     start = fixed_pairs(core, pairs, seed)

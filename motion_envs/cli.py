@@ -415,7 +415,8 @@ def _train_wandr(args: argparse.Namespace) -> int:
              "weights": weights_destination(name, run_dir, args.weights, args.ship), "run_dir": run_dir, "init": _prior_init(args),
              "far_goal_probability": args.far_goal_probability, "contact_weight": args.contact_weight,
              "pace_weight": args.pace_weight, "upright_weight": args.upright_weight, "turn_weight": args.turn_weight,
-             "pace_frames": args.pace_frames, "learning_rate": args.learning_rate}  # fmt: skip
+             "pace_frames": args.pace_frames, "learning_rate": args.learning_rate, "reach_weight": args.reach_weight,
+             "end_goal_probability": args.end_goal_probability}  # fmt: skip
     config = WandrTrainConfig(model=model, data_hash=dataset.path.stem, command="motion-envs " + " ".join(sys.argv[1:]),
                               **{key: value for key, value in given.items() if value is not None})  # fmt: skip
     entry = train_wandr(config, train_clips, validation_clips)
@@ -658,6 +659,12 @@ def parser() -> argparse.ArgumentParser:
                             "pulled to the data's; default 0, off)")  # fmt: skip
     train.add_argument("--pace-frames", type=int, default=None,
                        help="wandr, clops: frames of each pace / upright rollout (default 90)")
+    train.add_argument("--reach-weight", type=float, default=None,
+                       help="wandr: weight of the reach term (the same rollouts' right-wrist distance to the goal pulled "
+                            "to the data's; default 0, off)")  # fmt: skip
+    train.add_argument("--end-goal-probability", type=float, default=None,
+                       help="wandr: share of those rollouts whose goal is due at their last frame, as the paper's "
+                            "protocol (default 0)")  # fmt: skip
     train.add_argument("--device", default=None, help="ppo, dqn: where the policy and the prior run (default cpu; cuda)")
     train.add_argument("--engine", default=None, choices=("sb3", "rllib"),
                        help="ppo, dqn: Stable-Baselines3 in this process (default) or RLlib on Ray (pip install -e '.[ray]')")

@@ -249,26 +249,31 @@ def test_the_free_running_terms_pull_sampled_rollouts_towards_the_datas_progress
                               pace_frames=10, run_dir=tmp_path / "run", weights=tmp_path / "plain.pt")  # fmt: skip
     plain_entry = train_wandr(config, clips, clips)
     tuned = dataclasses.replace(config, epochs=3, init=config.weights, pace_weight=30.0, upright_weight=30.0, turn_weight=30.0,
-                                pace_windows=16, run_dir=tmp_path / "tuned", weights=tmp_path / "tuned.pt")  # fmt: skip
+                                reach_weight=30.0, end_goal_probability=0.5, pace_windows=16, run_dir=tmp_path / "tuned",
+                                weights=tmp_path / "tuned.pt")  # fmt: skip
     tuned_entry = train_wandr(tuned, clips, clips)
-    control = dataclasses.replace(tuned, pace_weight=0.0, upright_weight=0.0, turn_weight=0.0, run_dir=tmp_path / "control",
-                                  weights=tmp_path / "control.pt")  # the same fine-tune without the terms
+    control = dataclasses.replace(tuned, pace_weight=0.0, upright_weight=0.0, turn_weight=0.0, reach_weight=0.0,
+                                  run_dir=tmp_path / "control", weights=tmp_path / "control.pt")  # the same fine-tune without the terms
     train_wandr(control, clips, clips)
     starts = clips.window_starts(10)[::7]
 
-    def gaps(weights) -> dict[str, float]:
+    def gaps(weights, end_goal_probability: float = 0.0) -> dict[str, float]:
         with torch.no_grad():
             terms = free_run_terms(load_wandr(weights).eval(), clips, WristGoals(clips, config), starts, 10, body,
-                                   torch.Generator().manual_seed(1))  # fmt: skip
+                                   torch.Generator().manual_seed(1), end_goal_probability)  # fmt: skip
         return {name: float(value.sqrt()) for name, value in terms.items()}
 
     before, after = gaps(control.weights), gaps(tuned.weights)
     assert after["pace"] < 0.85 * before["pace"] and after["upright"] < 0.85 * before["upright"]
     assert after["turn"] < 0.85 * before["turn"]
-    for name in ("pace_gap_cm", "upright_gap_cm", "turn_gap_crad"):
+    assert gaps(tuned.weights, 1.0)["reach"] < 0.85 * gaps(control.weights, 1.0)["reach"]  # goals due at the run's end
+    for name in ("pace_gap_cm", "upright_gap_cm", "turn_gap_crad", "reach_gap_cm"):
         assert tuned_entry[f"validation_{name}_10_frames"] < plain_entry[f"validation_{name}_10_frames"]
+    assert tuned_entry["validation_reach_gap_cm_goal_due_at_frame_10"] < plain_entry["validation_reach_gap_cm_goal_due_at_frame_10"]
     with pytest.raises(ValueError, match="upright_weight"):
         WandrTrainConfig(upright_weight=-1.0)
+    with pytest.raises(ValueError, match="end_goal_probability"):
+        WandrTrainConfig(end_goal_probability=1.5)
 
 
 def test_the_turn_term_measures_wrapped_ground_yaw_between_rotations():

@@ -116,6 +116,11 @@ class WandrTrainConfig(TrainRun):
     """Weight of `free_run_terms`' upright gap (cm²; 0: off)."""
     turn_weight: float = 0.0
     """Weight of `free_run_terms`' turn gap (centiradians², like the cm² terms; 0: off)."""
+    reach_weight: float = 0.0
+    """Weight of `free_run_terms`' reach gap (cm²; 0: off): the right wrist's distance to its goal against the data's."""
+    end_goal_probability: float = 0.0
+    """Share of free runs whose goal is due at the run's last frame (the paper's protocol: every goal due when the
+    episode ends); the others' goals are at least `pace_frames` ahead. See the module doc."""
     pace_frames: int = 90
     """Frames of each free-running rollout (its windows have a goal at least this far ahead)."""
     pace_windows: int = 64
@@ -125,15 +130,17 @@ class WandrTrainConfig(TrainRun):
     run_dir: Path = Path("runs/wandr")
 
     def __post_init__(self) -> None:
-        if min(self.pace_weight, self.upright_weight, self.turn_weight) < 0 or self.pace_frames < 1 or self.pace_windows < 1:
-            raise ValueError(f"pace_weight, upright_weight and turn_weight must be ≥ 0 and pace_frames, pace_windows ≥ 1, "
-                             f"got {self.pace_weight}, {self.upright_weight}, {self.turn_weight}, {self.pace_frames}, "
-                             f"{self.pace_windows}")  # fmt: skip
+        weights = (self.pace_weight, self.upright_weight, self.turn_weight, self.reach_weight)
+        if min(weights) < 0 or self.pace_frames < 1 or self.pace_windows < 1:
+            raise ValueError(f"pace_weight, upright_weight, turn_weight and reach_weight must be ≥ 0 and pace_frames, "
+                             f"pace_windows ≥ 1, got {weights}, {self.pace_frames}, {self.pace_windows}")  # fmt: skip
+        if not 0.0 <= self.end_goal_probability <= 1.0:
+            raise ValueError(f"end_goal_probability must be in [0, 1], got {self.end_goal_probability}")
 
     @property
     def free_running(self) -> bool:
         """Whether batches roll windows out with z ~ N(0, I) (`free_run_terms`)."""
-        return self.pace_weight > 0 or self.upright_weight > 0 or self.turn_weight > 0
+        return max(self.pace_weight, self.upright_weight, self.turn_weight, self.reach_weight) > 0
 
     def rollout_limit(self, epoch: int) -> int:
         """k of the schedule: 1 at the start, `max_rollout` from half-way on."""
@@ -295,23 +302,29 @@ def rollout_terms(model: WandrPrior, clips: WandrClips, targets: HindsightTarget
 
 
 def free_run_terms(model: WandrPrior, clips: WandrClips, targets: HindsightTargets, starts: torch.Tensor, frames: int,
-                   body: BodyModel, generator: torch.Generator | None = None) -> dict[str, torch.Tensor]:  # fmt: skip
+                   body: BodyModel, generator: torch.Generator | None = None,
+                   end_goal_probability: float = 0.0) -> dict[str, torch.Tensor]:  # fmt: skip
     """Mean squared gaps (cm²) to the data over a rollout of `frames` frames with z ~ N(0, I) from the data at
     `starts` (B,), towards the goal frames `targets.free_run_goal_frames` hands out (WANDR: one at least `frames`
-    ahead; CLOPS: the next action's end; see the module doc):
+    ahead, or with `end_goal_probability` the run's last frame; CLOPS: the next action's end; see the module doc):
 
     * pace: how far the pelvis is from its goal (on the ground, to the data's pelvis at the goal frame) against how
       far the data's is at the same frame;
     * upright: the head's height above the lowest ankle or foot joint against the data's at the same frame.
     * turn: how far the pelvis's heading is from the goal frame's (ground yaw, centiradians) against how far the
       data's is at the same frame: the pace term's progress for turning, which moves the pelvis little.
+    * reach: how far the right wrist is from the goal frame's (3-D) against how far the data's is at the same
+      frame: where the goal is due at the run's end, the data's wrist arrives there, and so must the prior's.
 
     The gradient reaches each frame's delta only (the state it starts from is detached): back-propagated through
     the whole rollout, the pace term blew the fine-tune up within two epochs (training loss 16 -> 1,125,
     reconstruction 1.4 -> 744, at weights 0.003 and 0.01)."""
     run_goal_frames = targets.goal_frames(starts, frames, generator)
+    if end_goal_probability > 0:  # no draw otherwise: runs without end goals keep their random stream
+        at_end = torch.rand(len(starts), generator=generator) < end_goal_probability
+        run_goal_frames = torch.where(at_end, starts + frames, run_goal_frames)
     state = clips.state(starts)
-    totals = {"pace": 0.0, "upright": 0.0, "turn": 0.0}
+    totals = {"pace": 0.0, "upright": 0.0, "turn": 0.0, "reach": 0.0}
     for step in range(frames):
         goal_frames = targets.free_run_goal_frames(starts, step, frames, run_goal_frames)
         goal, goal_orient = clips.joints[goal_frames, PELVIS, :2], clips.orient[goal_frames]
@@ -327,6 +340,9 @@ def free_run_terms(model: WandrPrior, clips: WandrClips, targets: HindsightTarge
         turn_left = yaw_change(state.orient, goal_orient).abs()
         data_turn_left = yaw_change(clips.orient[starts + step + 1], goal_orient).abs()
         totals["turn"] = totals["turn"] + ((turn_left - data_turn_left) * 100.0).pow(2).mean()
+        wrist_goal = clips.joints[goal_frames, RIGHT_WRIST]
+        reach_left = (state.joints[:, RIGHT_WRIST] - wrist_goal).norm(dim=-1)
+        totals["reach"] = totals["reach"] + ((reach_left - (data[:, RIGHT_WRIST] - wrist_goal).norm(dim=-1)) * 100.0).pow(2).mean()
         state = WandrState(*(value.detach() for value in state))
     return {name: total / frames for name, total in totals.items()}
 
@@ -381,6 +397,8 @@ def validate(model: WandrPrior, clips: WandrClips, targets: HindsightTargets, co
         for name, value in free_run_terms(model, clips, targets, starts, config.pace_frames, body, generator).items():
             unit = "crad" if name == "turn" else "cm"  # the turn gap is an angle (centiradians)
             figures[f"validation_{name}_gap_{unit}_{config.pace_frames}_frames"] = round(float(value.sqrt()), 2)
+        at_end = free_run_terms(model, clips, targets, starts, config.pace_frames, body, generator, end_goal_probability=1.0)
+        figures[f"validation_reach_gap_cm_goal_due_at_frame_{config.pace_frames}"] = round(float(at_end["reach"].sqrt()), 2)
     model.train()
     return figures
 
@@ -437,12 +455,14 @@ def train_delta_prior(model: WandrPrior, kind: str, config: WandrTrainConfig, tr
         goal_frames = train_targets.goal_frames(starts, steps)
         terms = rollout_terms(model, train, train_targets, starts, goal_frames, steps, body, config.free_bits)
         beta = config.kl_beta(step_number, epoch)
-        terms |= (free_run_terms(model, train, train_targets, paced, config.pace_frames, body) if len(paced)
-                  else {"pace": torch.zeros(()), "upright": torch.zeros(()), "turn": torch.zeros(())})  # fmt: skip
+        free_run = ("pace", "upright", "turn", "reach")
+        terms |= (free_run_terms(model, train, train_targets, paced, config.pace_frames, body,
+                                 end_goal_probability=config.end_goal_probability) if len(paced)
+                  else {name: torch.zeros(()) for name in free_run})  # fmt: skip
         total = (terms["recon"] + terms["joints"] + beta * terms["kl"] + config.contact_weight * terms["contact"]
                  + config.pace_weight * terms["pace"] + config.upright_weight * terms["upright"]
-                 + config.turn_weight * terms["turn"])  # fmt: skip
-        return {"total": total} | {name: terms[name] for name in ("recon", "joints", "kl", "contact", "pace", "upright", "turn")}
+                 + config.turn_weight * terms["turn"] + config.reach_weight * terms["reach"])  # fmt: skip
+        return {"total": total} | {name: terms[name] for name in ("recon", "joints", "kl", "contact", *free_run)}
 
     history = fit(model, optimiser, config.fit_settings(kind), epoch_batches, loss_terms,
                   lambda epoch: f"rollout ≤ {config.rollout_limit(epoch)}")  # fmt: skip

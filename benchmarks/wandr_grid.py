@@ -43,7 +43,29 @@ learned conditional prior p(z | c) in place of N(0, I) (`--learned-prior`,
 (40 epochs) 0.8 / 69.0, 72.0 / 76.0 (z = 0 paced: 63.6 / 65.1). Trained from scratch with the shipped
 recipe but every goal ≥ 1.5 m away: 3.2 / 65.6, 65.0 / 79.8.
 `benchmarks.wandr_pace` shows why: the prior lags its own intention on
-the windows it was trained on. The figures of this paragraph and the two
+the windows it was trained on.
+
+On the shipped prior (cleaned data, pace and upright terms) the lag is gone
+(`wandr_pace.md`: 0.33 m left after 6 s, the data 0.30) and the 8-s sampler
+misses at the deadline instead: on 500 rollouts (2 poses × 2 samples, seed 0)
+its pelvis is a median 0.3 m from the goal at 8 s, as the data's at t_G, but
+the wrist ends 0.22-0.30 m off (goals at 0.9 / 1.35 m: 20% / 19% reached);
+paced goals leave time after t_G, where I^w is large, to home in. The reach
+term (`train wandr --reach-weight R --end-goal-probability P`,
+`train_wandr.free_run_terms`), 4 epochs of the `wandr_upright` stage's
+fine-tune from the shipped prior (pace 0.03, upright 1.0, lr 1e-4), scored
+the same way (8-s SR / FS, paced SR / FS, then the head over the last second
+of 15-s walks towards a goal 15 m ahead, `benchmarks.floor`'s sinking row
+with 16 episodes from seed 100; shipped: 8.4 / 19.8, 60.2 / 50.1, 1.46 m):
+R = 0.1, P = 0.5: 17.6 / 22.2, 75.2 / 53.4, 1.44 m; R = 0.3: 20.2 / 25.1,
+70.0 / 57.1 (8 walks: 1.36 m); R = 1: 24.6 / 21.7, 67.6 / 56.0, 1.42 m
+(goals at 0.9 / 1.35 m 51% / 71%, at 1.8 m 1%, at 0 and 0.45 m none);
+R = 1 at lr 5e-5: 14.0 / 23.8, 70.2 / 55.9, 1.42 m; R = 0.3, P = 1:
+24.8 / 25.4, 69.2 / 57.9, 1.33 m; upright 3 with R = 1 / R = 3 (P = 0.8):
+20.0 / 22.0% at the 8 s, 8 walks 1.26 / 1.28 m. The WandrReach PPO policy
+on the R = 0.1 prior (not fine-tuned on it): 87.6% mean latent, 91.6%
+sampled. None ships: each costs the 15-s walk its head height (target
+1.45 m), and the best stays 7 points under the paper's 32%. The figures of this paragraph and the two
 above were measured on the previous shipped prior (uncleaned CMU data); the
 shipped prior is now the one retrained on the cleaned data (CMU + ACCAD,
 contact loss, rollouts of up to 60 frames), and the previous one is a

@@ -62,10 +62,16 @@ R = 0.1, P = 0.5: 17.6 / 22.2, 75.2 / 53.4, 1.44 m; R = 0.3: 20.2 / 25.1,
 (goals at 0.9 / 1.35 m 51% / 71%, at 1.8 m 1%, at 0 and 0.45 m none);
 R = 1 at lr 5e-5: 14.0 / 23.8, 70.2 / 55.9, 1.42 m; R = 0.3, P = 1:
 24.8 / 25.4, 69.2 / 57.9, 1.33 m; upright 3 with R = 1 / R = 3 (P = 0.8):
-20.0 / 22.0% at the 8 s, 8 walks 1.26 / 1.28 m. The WandrReach PPO policy
-on the R = 0.1 prior (not fine-tuned on it): 87.6% mean latent, 91.6%
-sampled. None ships: each costs the 15-s walk its head height (target
-1.45 m), and the best stays 7 points under the paper's 32%. The figures of this paragraph and the two
+20.0 / 22.0% at the 8 s, 8 walks 1.26 / 1.28 m. Each of these costs the
+15-s walk its head height (target 1.45 m). With 150-frame free runs instead
+of 90 (`--pace-frames 150`, R = 1, P = 0.5; 36 min beside another job):
+27.6 / 15.6, 72.2 / 50.4, head 1.48 m (lowest 1.24, shipped 1.10): better
+than the shipped prior on every figure, 4 points under the paper's 32%, and
+the candidate for the next shipped prior. Not shipped yet: the WandrReach
+PPO policy, trained on the shipped prior, drops on it (500 rollouts, mean
+latent / sampled: 90.4 / 96.6% -> 79.2 / 85.4%; on the R = 0.1 prior
+87.6 / 91.6%), so it ships with a PPO fine-tune on it and every WANDR
+table rerun. The figures of this paragraph and the two
 above were measured on the previous shipped prior (uncleaned CMU data); the
 shipped prior is now the one retrained on the cleaned data (CMU + ACCAD,
 contact loss, rollouts of up to 60 frames), and the previous one is a

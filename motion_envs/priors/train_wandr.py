@@ -61,9 +61,10 @@ Reads top to bottom: clips -> windows with hallucinated goals -> statistics
   off at the deadline. The reach term pulls the free run's wrist-to-goal
   distance towards the data's at the same frame; with a share of free runs
   whose goal is due at their last frame (the protocol's case) the data's
-  wrist arrives there. It lifts the 8-s sampler (8% -> 18-25% on 500
-  rollouts) but lowers the 15-s walk's head by 2-13 cm; not in the shipped
-  prior (figures: `benchmarks/wandr_grid.py`'s module doc).
+  wrist arrives there. With 90-frame free runs it lifts the 8-s sampler
+  (8% -> 18-25% on 500 rollouts) but lowers the 15-s walk's head by 2-13 cm;
+  with 150-frame ones (R = 1, P = 0.5) 28% with the head kept (1.48 m); not
+  in the shipped prior yet (figures: `benchmarks/wandr_grid.py`'s module doc).
 """
 
 from __future__ import annotations

@@ -67,7 +67,8 @@ R = 1 at lr 5e-5: 14.0 / 23.8, 70.2 / 55.9, 1.42 m; R = 0.3, P = 1:
 of 90 (`--pace-frames 150`, R = 1, P = 0.5; 36 min beside another job):
 27.6 / 15.6, 72.2 / 50.4, head 1.48 m (lowest 1.24, shipped 1.10): better
 than the shipped prior on every figure, 4 points under the paper's 32%, and
-the candidate for the next shipped prior. Not shipped yet: the WandrReach
+the candidate for the next shipped prior; on the full grid (3,750 rollouts a
+row, seed 0) 8-s 29.4% / FS 14.1% / DTG 29.9 cm, paced 71.7% / 49.1%. Not shipped yet: the WandrReach
 PPO policy, trained on the shipped prior, drops on it (500 rollouts, mean
 latent / sampled: 90.4 / 96.6% -> 79.2 / 85.4%; on the R = 0.1 prior
 87.6 / 91.6%); fine-tuned on it with the shipped policy's last stage

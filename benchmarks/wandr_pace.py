@@ -84,6 +84,13 @@ def pace(stepper: WandrStepper, clips: WandrClips, starts: torch.Tensor, horizon
     return *left_and_walked(torch.stack(track, 1), goal[:, :2]), (state.joints[:, RIGHT_WRIST] - goal).norm(dim=-1)
 
 
+def prior_labels(weights: list[Path]) -> list[str]:
+    """Each prior's column name: its file's stem, with its folder where another prior shares the stem (every
+    prior is saved as wandr.pt, and columns of the same name would overwrite each other)."""
+    stems = [path.stem for path in weights]
+    return [f"{path.parent.name}/{path.stem}" if stems.count(path.stem) > 1 else path.stem for path in weights]
+
+
 def main(weights: list[Path], horizon_s: int = 6, min_travel: float = 2.0) -> int:
     """Print and write the pace table for each prior in `weights` (default: the shipped one)."""
     from benchmarks.wandr_grid import training_clips
@@ -100,11 +107,11 @@ def main(weights: list[Path], horizon_s: int = 6, min_travel: float = 2.0) -> in
     columns = {"data": tuple(values.median(1).values for values in data)}
     reached = {}
     body = BodyModel()
-    for path in weights:
+    for path, prior_label in zip(weights, prior_labels(weights)):
         stepper = WandrStepper(load_wandr(path).eval(), body)
         for sigma, name in ((1.0, "z ~ N(0, I)"), (0.0, "z = 0")):
             left, walked, wrist = pace(stepper, clips, starts, horizon, sigma)
-            label = f"{path.stem}, {name}"
+            label = f"{prior_label}, {name}"
             columns[label] = (left.median(1).values, walked.median(1).values)
             reached[label] = 100 * float((wrist < 0.1).float().mean())
     lines = ["# WANDR pace on the prior's own training windows", "",

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -223,6 +224,13 @@ def test_kl_weight_warms_up_then_rises_at_the_chosen_epoch():
     assert config.kl_beta(10_000, 4) == 0.01 and config.kl_beta(10_000, 5) == 0.1
     assert WandrTrainConfig().kl_beta(10_000, 39) == 0.01  # the paper's β throughout by default
     assert [config.rollout_limit(epoch) for epoch in (0, 10, 20, 39)] == [1, 5, 10, 10]
+
+
+def test_pace_table_columns_name_priors_that_share_a_file_name_by_their_folder():
+    from benchmarks.wandr_pace import prior_labels
+
+    assert prior_labels([Path("weights/wandr.pt"), Path("runs/tuned/wandr.pt"), Path("runs/wandr_wrist.pt")]) == [
+        "weights/wandr", "tuned/wandr", "wandr_wrist"]  # fmt: skip
 
 
 def test_pace_check_rolls_the_prior_towards_a_goal_due_at_the_window_end(walking_motion_30fps, body, shipped):

@@ -94,6 +94,8 @@ WANDR_KIND = "wandr"
 HEAD = joint_index("head")
 FOOT_JOINTS = [joint_index(name) for name in ("left_ankle", "right_ankle", "left_foot", "right_foot")]
 FAR_GOAL_DISTANCE = 1.5
+FREE_RUN_TERMS = ("pace", "upright", "turn", "reach")
+"""`free_run_terms`' gaps; each has a `<name>_weight` in `WandrTrainConfig`."""
 
 
 @dataclass
@@ -139,17 +141,21 @@ class WandrTrainConfig(TrainRun):
     run_dir: Path = Path("runs/wandr")
 
     def __post_init__(self) -> None:
-        weights = (self.pace_weight, self.upright_weight, self.turn_weight, self.reach_weight)
-        if min(weights) < 0 or self.pace_frames < 1 or self.pace_windows < 1:
+        if min(self.free_run_weights.values()) < 0 or self.pace_frames < 1 or self.pace_windows < 1:
             raise ValueError(f"pace_weight, upright_weight, turn_weight and reach_weight must be ≥ 0 and pace_frames, "
-                             f"pace_windows ≥ 1, got {weights}, {self.pace_frames}, {self.pace_windows}")  # fmt: skip
+                             f"pace_windows ≥ 1, got {self.free_run_weights}, {self.pace_frames}, {self.pace_windows}")  # fmt: skip
         if not 0.0 <= self.end_goal_probability <= 1.0:
             raise ValueError(f"end_goal_probability must be in [0, 1], got {self.end_goal_probability}")
 
     @property
+    def free_run_weights(self) -> dict[str, float]:
+        """{term: weight} of every `FREE_RUN_TERMS` gap in the loss."""
+        return {name: getattr(self, f"{name}_weight") for name in FREE_RUN_TERMS}
+
+    @property
     def free_running(self) -> bool:
         """Whether batches roll windows out with z ~ N(0, I) (`free_run_terms`)."""
-        return max(self.pace_weight, self.upright_weight, self.turn_weight, self.reach_weight) > 0
+        return max(self.free_run_weights.values()) > 0
 
     def rollout_limit(self, epoch: int) -> int:
         """k of the schedule: 1 at the start, `max_rollout` from half-way on."""
@@ -333,10 +339,11 @@ def free_run_terms(model: WandrPrior, clips: WandrClips, targets: HindsightTarge
         at_end = torch.rand(len(starts), generator=generator) < end_goal_probability
         run_goal_frames = torch.where(at_end, starts + frames, run_goal_frames)
     state = clips.state(starts)
-    totals = {"pace": 0.0, "upright": 0.0, "turn": 0.0, "reach": 0.0}
+    totals = dict.fromkeys(FREE_RUN_TERMS, 0.0)
     for step in range(frames):
         goal_frames = targets.free_run_goal_frames(starts, step, frames, run_goal_frames)
-        goal, goal_orient = clips.joints[goal_frames, PELVIS, :2], clips.orient[goal_frames]
+        goal_joints, goal_orient = clips.joints[goal_frames], clips.orient[goal_frames]
+        goal = goal_joints[:, PELVIS, :2]
         cond = model.normalise_condition(condition(state, targets.features(state, starts + step, goal_frames)))
         noise = torch.randn(len(starts), model.config.latent, generator=generator)
         delta = model.denormalise_delta(model.generate(noise, cond))
@@ -349,7 +356,7 @@ def free_run_terms(model: WandrPrior, clips: WandrClips, targets: HindsightTarge
         turn_left = yaw_change(state.orient, goal_orient).abs()
         data_turn_left = yaw_change(clips.orient[starts + step + 1], goal_orient).abs()
         totals["turn"] = totals["turn"] + ((turn_left - data_turn_left) * 100.0).pow(2).mean()
-        wrist_goal = clips.joints[goal_frames, RIGHT_WRIST]
+        wrist_goal = goal_joints[:, RIGHT_WRIST]
         reach_left = (state.joints[:, RIGHT_WRIST] - wrist_goal).norm(dim=-1)
         totals["reach"] = totals["reach"] + ((reach_left - (data[:, RIGHT_WRIST] - wrist_goal).norm(dim=-1)) * 100.0).pow(2).mean()
         state = WandrState(*(value.detach() for value in state))
@@ -464,14 +471,13 @@ def train_delta_prior(model: WandrPrior, kind: str, config: WandrTrainConfig, tr
         goal_frames = train_targets.goal_frames(starts, steps)
         terms = rollout_terms(model, train, train_targets, starts, goal_frames, steps, body, config.free_bits)
         beta = config.kl_beta(step_number, epoch)
-        free_run = ("pace", "upright", "turn", "reach")
         terms |= (free_run_terms(model, train, train_targets, paced, config.pace_frames, body,
                                  end_goal_probability=config.end_goal_probability) if len(paced)
-                  else {name: torch.zeros(()) for name in free_run})  # fmt: skip
-        total = (terms["recon"] + terms["joints"] + beta * terms["kl"] + config.contact_weight * terms["contact"]
-                 + config.pace_weight * terms["pace"] + config.upright_weight * terms["upright"]
-                 + config.turn_weight * terms["turn"] + config.reach_weight * terms["reach"])  # fmt: skip
-        return {"total": total} | {name: terms[name] for name in ("recon", "joints", "kl", "contact", *free_run)}
+                  else {name: torch.zeros(()) for name in FREE_RUN_TERMS})  # fmt: skip
+        total = terms["recon"] + terms["joints"] + beta * terms["kl"] + config.contact_weight * terms["contact"]
+        for name, weight in config.free_run_weights.items():  # one by one, in FREE_RUN_TERMS order
+            total = total + weight * terms[name]
+        return {"total": total} | {name: terms[name] for name in ("recon", "joints", "kl", "contact", *FREE_RUN_TERMS)}
 
     history = fit(model, optimiser, config.fit_settings(kind), epoch_batches, loss_terms,
                   lambda epoch: f"rollout ≤ {config.rollout_limit(epoch)}")  # fmt: skip
